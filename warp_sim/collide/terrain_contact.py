@@ -1,0 +1,167 @@
+"""Body-terrain contact: the cheapest exact query per shape (SEED.md 4.3).
+
+Conventions: ``depth`` > 0 is penetration, < 0 a gap; the normal points out of the terrain.
+
+Spheres: one closest-point query against the analytic surface y = H(x, z).  The closest point
+minimises F(x, z) = |(x, H, z) - c|^2 / 2; Newton's method on F uses the terrain Hessian that
+the Fourier evaluation gives for free:
+
+    grad F = (x - cx + dy Hx,  z - cz + dy Hz),            dy = H - cy
+    hess F = [[1 + Hx^2 + dy Hxx,  Hx Hz + dy Hxz],
+              [Hx Hz + dy Hxz,     1 + Hz^2 + dy Hzz]]
+
+When that Hessian is not positive definite (the sphere centre lies beyond a centre of
+curvature) the Gauss-Newton part [[1 + Hx^2, Hx Hz], [Hx Hz, 1 + Hz^2]] is used instead, which
+always is.  The search starts from last substep's closest point (stored in the slot), so a
+resting sphere converges in one or two iterations.  A sphere whose vertical gap divided by
+sqrt(1 + G^2) (G bounds |grad H| everywhere) already exceeds r + margin cannot touch the
+surface and skips the search.
+
+Boxes: the thesis's checkpoints, one thread per checkpoint.  A checkpoint p is compared with the
+surface directly below it: depth = (H(p.x, p.z) - p.y) n_y with n the unit normal from the
+gradient, the first-order distance to the surface (exact on planes).
+
+Speculative margin: a slot is active while depth > -(margin + h |v_n| + h^2 |g|), the gap the
+point can close in one substep; the solver then lets it close exactly that gap (v_n >= -gap/h),
+so a fast body stops on the surface instead of passing through it.
+"""
+
+import warp as wp
+
+from ..integrate import world_inv_inertia
+from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, fourier_normal, fourier_sample
+from ..types import SHAPE_SPHERE
+
+NEWTON_ITERATIONS = 4
+
+
+@wp.func
+def sphere_fourier_closest(
+    terrain_coef: wp.array(dtype=wp.vec2),
+    terrain_terms: int,
+    terrain_frequency: float,
+    terrain_scale: wp.vec3,
+    terrain_offset: wp.vec3,
+    center: wp.vec3,
+    start: wp.vec2,
+) -> wp.vec2:
+    """(x, z) of the surface point closest to ``center``, by damped Newton from ``start``."""
+    x = start[0]
+    z = start[1]
+    for _it in range(NEWTON_ITERATIONS):
+        s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z)
+        hx = s.grad[0]
+        hz = s.grad[1]
+        dy = s.height - center[1]
+        gx = x - center[0] + dy * hx
+        gz = z - center[2] + dy * hz
+        a = 1.0 + hx * hx + dy * s.hess[0]
+        b = hx * hz + dy * s.hess[1]
+        c = 1.0 + hz * hz + dy * s.hess[2]
+        det = a * c - b * b
+        if a <= 0.0 or det <= 1.0e-12:
+            a = 1.0 + hx * hx
+            b = hx * hz
+            c = 1.0 + hz * hz
+            det = a * c - b * b
+        x = x - (c * gx - b * gz) / det
+        z = z - (a * gz - b * gx) / det
+    return wp.vec2(x, z)
+
+
+@wp.kernel
+def collide_terrain(
+    # Model
+    checkpoint_body: wp.array(dtype=wp.int32),
+    checkpoint_local: wp.array(dtype=wp.vec3),
+    body_shape: wp.array(dtype=wp.int32),
+    body_size: wp.array(dtype=wp.vec3),
+    body_inv_mass: wp.array(dtype=float),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    terrain_kind: int,
+    terrain_coef: wp.array(dtype=wp.vec2),
+    terrain_terms: int,
+    terrain_frequency: float,
+    terrain_scale: wp.vec3,
+    terrain_offset: wp.vec3,
+    terrain_plane: wp.vec4,
+    terrain_slope_bound: float,
+    # Settings
+    h: float,
+    gravity_length: float,
+    speculative_margin: float,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.mat33),
+    body_vel: wp.array(dtype=wp.vec3),
+    body_angmom: wp.array(dtype=wp.vec3),
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    terrain_contact_surface: wp.array(dtype=wp.vec2),
+    contact_count: wp.array(dtype=wp.int32),
+):
+    slot = wp.tid()
+    body = checkpoint_body[slot]
+    x = body_pos[body]
+    rot = body_rot[body]
+    v = body_vel[body]
+    omega = world_inv_inertia(rot, body_inv_inertia[body]) * body_angmom[body]
+    is_sphere = body_shape[body] == SHAPE_SPHERE
+    radius = body_size[body][0]
+
+    depth = float(-1.0e30)
+    normal = wp.vec3(0.0, 1.0, 0.0)
+    point = x
+    if body_inv_mass[body] > 0.0:
+        if terrain_kind == TERRAIN_PLANE:
+            n = wp.vec3(terrain_plane[0], terrain_plane[1], terrain_plane[2])
+            normal = n
+            if is_sphere:
+                point = x - radius * n
+            else:
+                point = x + rot * checkpoint_local[slot]
+            depth = terrain_plane[3] - wp.dot(n, point)
+        elif terrain_kind == TERRAIN_FOURIER:
+            if is_sphere:
+                below = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+                                       x[0], x[2])
+                lower_bound = (x[1] - below.height) / wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
+                reach = speculative_margin + h * wp.length(v) + h * h * gravity_length
+                if lower_bound - radius < reach:
+                    start = wp.vec2(x[0], x[2])
+                    if terrain_contact_active[slot] != 0:
+                        start = terrain_contact_surface[slot]
+                    xz = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                                terrain_offset, x, start)
+                    s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                       terrain_offset, xz[0], xz[1])
+                    normal = fourier_normal(s.grad)
+                    surface = wp.vec3(xz[0], s.height, xz[1])
+                    depth = radius - wp.dot(x - surface, normal)
+                    point = x - radius * normal
+                    terrain_contact_surface[slot] = xz
+            else:
+                point = x + rot * checkpoint_local[slot]
+                s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+                                   point[0], point[2])
+                normal = fourier_normal(s.grad)
+                depth = (s.height - point[1]) * normal[1]
+
+    point_vel = v + wp.cross(omega, point - x)
+    approach = wp.max(-wp.dot(point_vel, normal), 0.0)
+    gap_closable = speculative_margin + h * approach + h * h * gravity_length
+    if depth > -gap_closable:
+        terrain_contact_active[slot] = 1
+        terrain_contact_point[slot] = point
+        terrain_contact_normal[slot] = normal
+        terrain_contact_depth[slot] = depth
+        wp.atomic_add(contact_count, 0, 1)
+    else:
+        terrain_contact_active[slot] = 0
+        terrain_contact_normal_impulse[slot] = 0.0
+        terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)

@@ -1,0 +1,84 @@
+"""The static part of a simulation: bodies, shapes, materials, checkpoints, terrain."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .contacts import Contacts
+from .state import State
+from .terrain import Terrain, terrain_model_fields
+
+
+class Model:
+    """Static arrays read by every kernel; built by ``ModelBuilder.finalize``.
+
+    Attributes (arrays of length ``body_count`` unless noted):
+        body_shape: SHAPE_SPHERE or SHAPE_BOX.
+        body_size: sphere (radius, 0, 0) or box half-extents [m].
+        body_bound_radius: radius of the bounding sphere about the centre of mass [m].
+        body_inv_mass: 1/m [1/kg]; 0 for static bodies.
+        body_inertia, body_inv_inertia: principal body-frame inertia and its inverse (diagonal,
+            SEED.md 2: box M/12 (h^2+l^2, ...), sphere 2/5 M r^2); zero inverse for static bodies.
+        body_restitution, body_friction, body_rolling_resistance: material per body; friction is
+            the Coulomb mu actually used (1 - slipperiness under the thesis's friction model).
+        body_checkpoint_start, body_checkpoint_count: the body's terrain contact slot range.
+        checkpoint_body, checkpoint_local: per slot, its body and body-frame point [m].
+        terrain_*: flat terrain description (see terrain.py).
+    """
+
+    def __init__(self, host: dict, terrain: Terrain, device):
+        self.device = device
+        self.terrain = terrain
+        self.host = host
+        self.body_count = len(host["body_shape"])
+        self.checkpoint_count = len(host["checkpoint_body"])
+
+        def arr(name, dtype):
+            return wp.array(host[name], dtype=dtype, device=device)
+
+        self.body_shape = arr("body_shape", wp.int32)
+        self.body_size = arr("body_size", wp.vec3)
+        self.body_bound_radius = arr("body_bound_radius", float)
+        self.body_inv_mass = arr("body_inv_mass", float)
+        self.body_inertia = arr("body_inertia", wp.vec3)
+        self.body_inv_inertia = arr("body_inv_inertia", wp.vec3)
+        self.body_restitution = arr("body_restitution", float)
+        self.body_friction = arr("body_friction", float)
+        self.body_rolling_resistance = arr("body_rolling_resistance", float)
+        self.body_checkpoint_start = arr("body_checkpoint_start", wp.int32)
+        self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)
+        self.checkpoint_body = arr("checkpoint_body", wp.int32)
+        self.checkpoint_local = arr("checkpoint_local", wp.vec3)
+        self.set_terrain(terrain)
+
+    def set_terrain(self, terrain: Terrain):
+        """Swap the terrain in place; used by the GUI so physics and drawing change together."""
+        self.terrain = terrain
+        fields = terrain_model_fields(terrain)
+        self.terrain_kind = int(fields["terrain_kind"])
+        self.terrain_coef = wp.array(fields["terrain_coef"], dtype=wp.vec2, device=self.device)
+        self.terrain_terms = int(fields["terrain_terms"])
+        self.terrain_frequency = float(fields["terrain_frequency"])
+        self.terrain_scale = wp.vec3(*fields["terrain_scale"])
+        self.terrain_offset = wp.vec3(*fields["terrain_offset"])
+        self.terrain_plane = wp.vec4(*fields["terrain_plane"])
+        self.terrain_slope_bound = float(fields["terrain_slope_bound"])
+
+    @property
+    def body_mass(self) -> np.ndarray:
+        inv = self.host["body_inv_mass"]
+        return np.where(inv > 0, 1.0 / np.where(inv > 0, inv, 1.0), 0.0)
+
+    def state(self) -> State:
+        """A State holding the initial layout."""
+        s = State(self.body_count, self.device)
+        s.body_pos.assign(self.host["body_pos"])
+        s.body_quat.assign(self.host["body_quat"])
+        s.body_rot.assign(self.host["body_rot"])
+        s.body_vel.assign(self.host["body_vel"])
+        s.body_angmom.assign(self.host["body_angmom"])
+        return s
+
+    def contacts(self, pair_max: int = 0) -> Contacts:
+        return Contacts(self.checkpoint_count, pair_max, self.device)

@@ -1,0 +1,222 @@
+"""Simulator: owns the model, two states, contacts and the solver; runs whole steps.
+
+One step of ``dt`` is ``substeps`` substeps of h = dt / substeps, each:
+
+    contacts.clear -> collide_terrain(state_0) -> solver.step(state_0 -> state_1) -> swap
+
+The terrain kernel is launched only when the scene has a terrain, so a scene pays for what it
+uses.  On CUDA the whole step is captured once as a graph and replayed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from .collide import collide_terrain
+from .model import Model
+from .solvers.solver import SoftStepSolver, SolverSettings
+from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
+from .types import SHAPE_BOX
+
+
+class NonFiniteStateError(RuntimeError):
+    def __init__(self, body: int, step: int, time: float, shape: str):
+        super().__init__(f"body {body} ({shape}) became non-finite at step {step} (t = {time:.6g} s)")
+        self.body = body
+        self.step = step
+
+
+@dataclass
+class SimConfig:
+    """Simulation settings, the ``[sim]`` table of a scene file (units SI)."""
+
+    dt: float = 1.0 / 60.0
+    substeps: int = 4
+    gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
+    duration: float = 5.0
+    integrator: str = "semi_implicit"
+    rotation: str = "quaternion"
+    device: str = "cpu"
+    seed: int = 0
+    iterations: int = 4
+    relax_iterations: int = 2
+    contact_hertz: float = 30.0
+    damping_ratio: float = 10.0
+    max_push_velocity: float = 3.0
+    restitution_threshold: float = 1.0
+    speculative_margin: float = 0.02
+    checkpoints_per_edge: int = 0
+    contact_max: int = 0
+    extra: dict = field(default_factory=dict)
+
+    def solver_settings(self) -> SolverSettings:
+        return SolverSettings(
+            integrator=self.integrator,
+            rotation=self.rotation,
+            iterations=self.iterations,
+            relax_iterations=self.relax_iterations,
+            contact_hertz=self.contact_hertz,
+            damping_ratio=self.damping_ratio,
+            max_push_velocity=self.max_push_velocity,
+            restitution_threshold=self.restitution_threshold,
+        )
+
+
+@wp.kernel
+def advance_step_counter(sim_step: wp.array(dtype=wp.int32)):
+    sim_step[0] = sim_step[0] + 1
+
+
+class Simulator:
+    def __init__(self, model: Model, config: SimConfig):
+        self.model = model
+        self.config = config
+        self.device = wp.get_device(config.device)
+        self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device)
+        self.states = [model.state(), model.state()]
+        self.contacts = model.contacts(config.contact_max)
+        self._probe = model.contacts(0)
+        self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
+        self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self.step_count = 0
+        self.graph = None
+
+    @property
+    def state(self):
+        return self.states[0]
+
+    @property
+    def time(self) -> float:
+        return self.step_count * self.config.dt
+
+    @property
+    def substep_dt(self) -> float:
+        return self.config.dt / self.config.substeps
+
+    def collide(self, state, contacts, h: float, speculative_margin: float):
+        m = self.model
+        if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
+            return
+        wp.launch(
+            collide_terrain,
+            dim=m.checkpoint_count,
+            inputs=[
+                # Model
+                m.checkpoint_body, m.checkpoint_local, m.body_shape, m.body_size, m.body_inv_mass,
+                m.body_inv_inertia, m.terrain_kind, m.terrain_coef, m.terrain_terms, m.terrain_frequency,
+                m.terrain_scale, m.terrain_offset, m.terrain_plane, m.terrain_slope_bound,
+                # Settings
+                h, float(np.linalg.norm(self.config.gravity)), speculative_margin,
+                # State in
+                state.body_pos, state.body_rot, state.body_vel, state.body_angmom,
+                # Contacts
+                contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
+                contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
+                contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_surface, contacts.contact_count,
+            ],
+            device=self.device,
+        )
+
+    def _simulate_one_step(self):
+        h = self.substep_dt
+        for _ in range(self.config.substeps):
+            self.contacts.clear_counts()
+            self.collide(self.states[0], self.contacts, h, self.config.speculative_margin)
+            self.solver.step(self.model, self.states[0], self.states[1], self.contacts, h, self.body_bad_step,
+                             self.bad_count)
+            self.states[0], self.states[1] = self.states[1], self.states[0]
+        if self.config.substeps % 2 == 1:
+            # Keep the captured graph's output in the buffer it started from.
+            self.states[1].assign(self.states[0])
+            self.states[0], self.states[1] = self.states[1], self.states[0]
+        wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
+
+    def step(self, count: int = 1, check: bool = True):
+        """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""
+        for _ in range(count):
+            if self.device.is_cuda:
+                if self.graph is None:
+                    with wp.ScopedCapture(device=self.device) as capture:
+                        self._simulate_one_step()
+                    self.graph = capture.graph
+                wp.capture_launch(self.graph)
+            else:
+                self._simulate_one_step()
+            self.step_count += 1
+        if check:
+            self.check_finite()
+
+    def invalidate_graph(self):
+        """Call after changing model or settings: the captured graph baked the old values in."""
+        self.graph = None
+
+    def check_finite(self):
+        if int(self.bad_count.numpy()[0]) == 0:
+            return
+        steps = self.body_bad_step.numpy()
+        bad = np.where(steps >= 0)[0]
+        first = bad[np.argmin(steps[bad])]
+        step = int(steps[first]) + 1
+        shape = "box" if self.model.host["body_shape"][first] == SHAPE_BOX else "sphere"
+        raise NonFiniteStateError(int(first), step, step * self.config.dt, shape)
+
+    def reset(self):
+        self.states = [self.model.state(), self.model.state()]
+        self.contacts = self.model.contacts(self.config.contact_max)
+        self.body_bad_step.fill_(-1)
+        self.bad_count.zero_()
+        self.solver.sim_step.zero_()
+        self.step_count = 0
+        self.graph = None
+
+    # Measurements -----------------------------------------------------------------------------
+
+    def angular_velocity(self, state=None) -> np.ndarray:
+        s = state or self.state
+        rot = s.body_rot.numpy().astype(np.float64)
+        angmom = s.body_angmom.numpy().astype(np.float64)
+        inv_inertia = self.model.host["body_inv_inertia"].astype(np.float64)
+        body = np.einsum("nji,nj->ni", rot, angmom) * inv_inertia
+        return np.einsum("nij,nj->ni", rot, body)
+
+    def kinetic_energy(self, per_body: bool = False):
+        s = self.state
+        mass = self.model.body_mass
+        v = s.body_vel.numpy().astype(np.float64)
+        omega = self.angular_velocity(s)
+        angmom = s.body_angmom.numpy().astype(np.float64)
+        ke = 0.5 * mass * np.einsum("ni,ni->n", v, v) + 0.5 * np.einsum("ni,ni->n", omega, angmom)
+        return ke if per_body else float(ke.sum())
+
+    def max_penetration(self) -> float:
+        """Deepest penetration of the current state into the terrain [m] (0 if none)."""
+        self._probe.clear_counts()
+        self.collide(self.state, self._probe, self.substep_dt, 0.0)
+        depths = self._probe.active_terrain_depths()
+        return float(max(depths.max(), 0.0)) if depths.size else 0.0
+
+    def contact_count(self) -> int:
+        return int(self.contacts.contact_count.numpy()[0])
+
+    def terrain_record(self) -> dict:
+        t = self.model.terrain
+        if isinstance(t, FourierTerrain):
+            return {
+                "terrain_kind": "fourier",
+                "terrain_amplitudes": t.amplitude_table(),
+                "terrain_phases": t.phase_table(),
+                "terrain_frequency": t.frequency,
+                "terrain_scale": np.asarray(t.scale),
+                "terrain_offset": np.asarray(t.offset),
+            }
+        if isinstance(t, PlaneTerrain):
+            return {"terrain_kind": "plane", "terrain_normal": np.asarray(t.normal), "terrain_plane_offset": t.offset}
+        return {"terrain_kind": "none"}
+
+
+def expected_steps(duration: float, dt: float) -> int:
+    return max(1, int(math.ceil(duration / dt - 1e-9)))

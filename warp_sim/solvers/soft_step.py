@@ -1,0 +1,339 @@
+"""Soft-step contact solver for terrain contacts (after Box2D v3), one thread per body.
+
+Per substep h, for each body (SEED.md 3 gives the impulse algebra, Baraff's j formula):
+
+    1. pre-kick      v* = v + alpha g h                   (alpha from the integrator)
+    2. prepare       store approach speed v_n per contact (restitution needs the value before solving)
+    3. warm start    re-apply last substep's accumulated impulses (slot = persistent identity)
+    4. solve         `iterations` Gauss-Seidel sweeps with the soft bias (push-out)
+    5. integrate     x' = x + h v*, orientation by the integrator's scheme
+    6. relax         `relax_iterations` sweeps without bias: the push-out velocity moved the body
+                     out of the terrain but is removed here, so correcting penetration adds no energy
+    7. restitution   contacts that approached faster than the threshold and carried impulse get
+                     v_n = -e v_n(approach)  (Box2D's restitution pass)
+    8. post-kick     v' = v* + (1 - alpha) g h
+
+Normal impulse with accumulation and clamping (Catto's sequential impulses):
+
+    k_n   = 1/m + (r x n) . I^-1 (r x n)                       effective mass^-1 along n
+    j     = -(massScale / k_n) (v_n + bias) - impulseScale * J_acc
+    J_acc = max(J_acc + j, 0)                                    never pull
+
+Soft constraint (Box2D's b2MakeSoft): a contact is a spring-damper of frequency
+f = min(30 Hz, 1 / (4 h)) and damping ratio zeta = 10.  With omega = 2 pi f,
+a1 = 2 zeta + h omega, a2 = h omega a1, a3 = 1 / (1 + a2):
+biasRate = omega / a1, massScale = a2 a3, impulseScale = a3.  A speculative contact (gap s > 0)
+instead allows v_n >= -s / h, exactly closing the gap in one substep.  Push-out speed is capped.
+
+Friction: Coulomb, the accumulated tangential impulse vector is clamped to the disc
+|J_t| <= mu J_n; each sweep pushes it against the current slip direction t with mass 1/k_t.
+Rolling resistance (spheres): an angular impulse against the rolling spin, clamped to
+c_r r J_n, so balls on uneven ground come to rest as real ones do.
+
+Bodies own their slots, terrain is static, so no two threads ever write the same body: the
+sweeps are true Gauss-Seidel within a body and need no colouring.
+"""
+
+import math
+
+import warp as wp
+
+from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
+from ..types import SHAPE_SPHERE
+
+
+def soft_coefficients(h: float, contact_hertz: float, damping_ratio: float) -> wp.vec3:
+    """(biasRate, massScale, impulseScale) for substep h; stiffness capped at a quarter of 1/h."""
+    hertz = min(contact_hertz, 0.25 / h)
+    omega = 2.0 * math.pi * hertz
+    a1 = 2.0 * damping_ratio + h * omega
+    a2 = h * omega * a1
+    a3 = 1.0 / (1.0 + a2)
+    return wp.vec3(omega / a1, a2 * a3, a3)
+
+
+@wp.struct
+class BodyVelocity:
+    """A body's velocities while it is being solved, plus its rolling-resistance accumulator."""
+
+    v: wp.vec3
+    w: wp.vec3
+    rolling_impulse: wp.vec3
+
+
+@wp.func
+def apply_impulse(
+    vel: BodyVelocity, impulse: wp.vec3, arm: wp.vec3, inv_mass: float, inv_inertia: wp.mat33
+) -> BodyVelocity:
+    out = vel
+    out.v = vel.v + inv_mass * impulse
+    out.w = vel.w + inv_inertia * wp.cross(arm, impulse)
+    return out
+
+
+@wp.func
+def solve_terrain_contact(
+    slot: int,
+    x: wp.vec3,
+    vel: BodyVelocity,
+    inv_mass: float,
+    inv_inertia: wp.mat33,
+    friction: float,
+    h: float,
+    use_bias: int,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    gap_shift: float,
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+) -> BodyVelocity:
+    n = terrain_contact_normal[slot]
+    arm = terrain_contact_point[slot] - x
+    separation = -terrain_contact_depth[slot] + gap_shift
+
+    # Non-penetration
+    vn = wp.dot(vel.v + wp.cross(vel.w, arm), n)
+    rn = wp.cross(arm, n)
+    k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
+    bias = float(0.0)
+    mass_scale = float(1.0)
+    impulse_scale = float(0.0)
+    if separation > 0.0:
+        bias = separation / h
+    elif use_bias != 0:
+        bias = wp.max(soft[0] * separation, -max_push_velocity)
+        mass_scale = soft[1]
+        impulse_scale = soft[2]
+    acc = terrain_contact_normal_impulse[slot]
+    j = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
+    new_acc = wp.max(acc + j, 0.0)
+    terrain_contact_normal_impulse[slot] = new_acc
+    vel = apply_impulse(vel, (new_acc - acc) * n, arm, inv_mass, inv_inertia)
+
+    # Friction: clamp the accumulated tangential impulse to the Coulomb disc
+    vp = vel.v + wp.cross(vel.w, arm)
+    vt = vp - wp.dot(vp, n) * n
+    old_t = terrain_contact_tangent_impulse[slot]
+    old_t = old_t - wp.dot(old_t, n) * n
+    new_t = old_t
+    slip = wp.length(vt)
+    if slip > 1.0e-9:
+        t = vt / slip
+        rt = wp.cross(arm, t)
+        k_t = inv_mass + wp.dot(rt, inv_inertia * rt)
+        new_t = old_t - (slip / k_t) * t
+    limit = friction * new_acc
+    mag = wp.length(new_t)
+    if mag > limit:
+        new_t = new_t * (limit / mag)
+    terrain_contact_tangent_impulse[slot] = new_t
+    return apply_impulse(vel, new_t - old_t, arm, inv_mass, inv_inertia)
+
+
+@wp.func
+def solve_rolling(
+    vel: BodyVelocity,
+    n: wp.vec3,
+    inv_inertia: wp.mat33,
+    limit: float,
+) -> BodyVelocity:
+    """Angular impulse against the rolling part of the spin, accumulated and clamped to ``limit``."""
+    acc = vel.rolling_impulse
+    roll = vel.w - wp.dot(vel.w, n) * n
+    speed = wp.length(roll)
+    new_acc = acc
+    if speed > 1.0e-9:
+        axis = roll / speed
+        k = wp.dot(axis, inv_inertia * axis)
+        new_acc = acc - (speed / k) * axis
+    mag = wp.length(new_acc)
+    if mag > limit:
+        new_acc = new_acc * (limit / mag)
+    out = vel
+    out.w = vel.w + inv_inertia * (new_acc - acc)
+    out.rolling_impulse = new_acc
+    return out
+
+
+@wp.func
+def sweep(
+    start: int,
+    count: int,
+    x: wp.vec3,
+    vel: BodyVelocity,
+    inv_mass: float,
+    inv_inertia: wp.mat33,
+    friction: float,
+    rolling_limit_per_impulse: float,
+    h: float,
+    use_bias: int,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    shift_v: wp.vec3,
+    shift_w: wp.vec3,
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+) -> BodyVelocity:
+    for slot in range(start, start + count):
+        if terrain_contact_active[slot] != 0:
+            # After the drift the gap has grown by the point's displacement along n; shift_v and
+            # shift_w are that displacement's linear and angular parts (zero before the drift).
+            arm = terrain_contact_point[slot] - x
+            gap_shift = wp.dot(shift_v + wp.cross(shift_w, arm), terrain_contact_normal[slot])
+            vel = solve_terrain_contact(slot, x, vel, inv_mass, inv_inertia, friction, h, use_bias, soft,
+                                  max_push_velocity, gap_shift, terrain_contact_point, terrain_contact_normal,
+                                  terrain_contact_depth, terrain_contact_normal_impulse,
+                                  terrain_contact_tangent_impulse)
+            if rolling_limit_per_impulse > 0.0:
+                vel = solve_rolling(vel, terrain_contact_normal[slot], inv_inertia,
+                                    rolling_limit_per_impulse * terrain_contact_normal_impulse[slot])
+    return vel
+
+
+@wp.kernel
+def solve_and_integrate(
+    # Model
+    body_shape: wp.array(dtype=wp.int32),
+    body_size: wp.array(dtype=wp.vec3),
+    body_inv_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    body_restitution: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_rolling_resistance: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
+    gravity: wp.vec3,
+    h: float,
+    integrator: int,
+    rotation: int,
+    iterations: int,
+    relax_iterations: int,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    restitution_threshold: float,
+    sim_step: wp.array(dtype=wp.int32),
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    terrain_contact_approach: wp.array(dtype=float),
+    # State in
+    body_pos_in: wp.array(dtype=wp.vec3),
+    body_quat_in: wp.array(dtype=wp.quat),
+    body_rot_in: wp.array(dtype=wp.mat33),
+    body_vel_in: wp.array(dtype=wp.vec3),
+    body_angmom_in: wp.array(dtype=wp.vec3),
+    # State out
+    body_pos_out: wp.array(dtype=wp.vec3),
+    body_quat_out: wp.array(dtype=wp.quat),
+    body_rot_out: wp.array(dtype=wp.mat33),
+    body_vel_out: wp.array(dtype=wp.vec3),
+    body_angmom_out: wp.array(dtype=wp.vec3),
+    # Out
+    body_bad_step: wp.array(dtype=wp.int32),
+    bad_count: wp.array(dtype=wp.int32),
+):
+    i = wp.tid()
+    x = body_pos_in[i]
+    q = body_quat_in[i]
+    rot = body_rot_in[i]
+    angmom = body_angmom_in[i]
+    inv_mass = body_inv_mass[i]
+    if inv_mass == 0.0:
+        body_pos_out[i] = x
+        body_quat_out[i] = q
+        body_rot_out[i] = rot
+        body_vel_out[i] = body_vel_in[i]
+        body_angmom_out[i] = angmom
+        return
+
+    alpha = pre_kick_fraction(integrator)
+    inv_inertia = world_inv_inertia(rot, body_inv_inertia[i])
+    vel = BodyVelocity()
+    vel.v = body_vel_in[i] + (alpha * h) * gravity
+    omega_free = inv_inertia * angmom
+    vel.w = omega_free
+    vel.rolling_impulse = wp.vec3(0.0)
+
+    start = body_checkpoint_start[i]
+    count = body_checkpoint_count[i]
+    friction = body_friction[i]
+    rolling = float(0.0)
+    if body_shape[i] == SHAPE_SPHERE:
+        rolling = body_rolling_resistance[i] * body_size[i][0]
+
+    # Prepare and warm start
+    touching = int(0)
+    for slot in range(start, start + count):
+        if terrain_contact_active[slot] != 0:
+            touching = 1
+            n = terrain_contact_normal[slot]
+            arm = terrain_contact_point[slot] - x
+            terrain_contact_approach[slot] = wp.dot(vel.v + wp.cross(vel.w, arm), n)
+            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
+            vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
+
+    zero = wp.vec3(0.0)
+    if touching != 0:
+        for _it in range(iterations):
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 1,
+                                soft, max_push_velocity, zero, zero, terrain_contact_active, terrain_contact_point,
+                                terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
+                                terrain_contact_tangent_impulse)
+
+    # Drift: positions and orientation move with the solved velocity
+    new_angmom = angmom
+    if touching != 0:
+        new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
+    x_new = x + h * vel.v
+    q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], new_angmom, h, integrator, rotation)
+
+    if touching != 0:
+        shift_v = h * vel.v
+        shift_w = h * vel.w
+        for _it in range(relax_iterations):
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 0,
+                                soft, max_push_velocity, shift_v, shift_w, terrain_contact_active, terrain_contact_point,
+                                terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
+                                terrain_contact_tangent_impulse)
+        # Restitution
+        e = body_restitution[i]
+        if e > 0.0:
+            for slot in range(start, start + count):
+                approach = terrain_contact_approach[slot]
+                acc = terrain_contact_normal_impulse[slot]
+                if terrain_contact_active[slot] != 0 and approach < -restitution_threshold and acc > 0.0:
+                    n = terrain_contact_normal[slot]
+                    arm = terrain_contact_point[slot] - x
+                    vn = wp.dot(vel.v + wp.cross(vel.w, arm), n)
+                    rn = wp.cross(arm, n)
+                    k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
+                    new_acc = wp.max(acc - (vn + e * approach) / k_n, 0.0)
+                    terrain_contact_normal_impulse[slot] = new_acc
+                    vel = apply_impulse(vel, (new_acc - acc) * n, arm, inv_mass, inv_inertia)
+        new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
+
+    v_new = vel.v + ((1.0 - alpha) * h) * gravity
+    body_pos_out[i] = x_new
+    body_quat_out[i] = q_new
+    body_rot_out[i] = rot_new
+    body_vel_out[i] = v_new
+    body_angmom_out[i] = new_angmom
+
+    total = wp.dot(x_new, x_new) + wp.dot(v_new, v_new) + wp.dot(new_angmom, new_angmom) + wp.ddot(rot_new, rot_new)
+    if not wp.isfinite(total):
+        if body_bad_step[i] < 0:
+            body_bad_step[i] = sim_step[0]
+            wp.atomic_add(bad_count, 0, 1)
