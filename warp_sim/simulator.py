@@ -173,6 +173,44 @@ class Simulator:
         self.step_count = 0
         self.graph = None
 
+    # Editing and time travel ------------------------------------------------------------------
+
+    def snapshot(self) -> dict:
+        """Everything the next step reads: body state, contact warm-start data and counters.
+
+        Restoring it and stepping reproduces the original run bit for bit on CPU.
+        """
+        return {"step_count": self.step_count, "arrays": [wp.clone(a) for a in self._persistent_arrays()]}
+
+    def _persistent_arrays(self) -> list:
+        c = self.contacts
+        return [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+                c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                c.terrain_contact_surface, c.terrain_contact_approach, self.solver.sim_step]
+
+    def restore(self, snap: dict):
+        for dst, src in zip(self._persistent_arrays(), snap["arrays"]):
+            wp.copy(dst, src)
+        self.step_count = snap["step_count"]
+
+    def set_terrain(self, terrain):
+        """Replace the terrain the bodies collide with (GUI edits); takes effect next step."""
+        self.model.set_terrain(terrain)
+        self.invalidate_graph()
+
+    def update_settings(self, **changes):
+        """Change SimConfig fields (dt, substeps, gravity, integrator, ...) between steps.
+
+        Unknown names raise ValueError naming the field.
+        """
+        for key, value in changes.items():
+            if not hasattr(self.config, key):
+                raise ValueError(f"unknown simulation setting {key!r}")
+            setattr(self.config, key, value)
+        self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device)
+        self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
+        self.invalidate_graph()
+
     # Measurements -----------------------------------------------------------------------------
 
     def angular_velocity(self, state=None) -> np.ndarray:
