@@ -44,7 +44,7 @@ class FourierTerrain:
 
     terms: int = 5
     frequency: float = 0.35
-    amplitude: float = 1.5
+    amplitude: float = 0.5
     phase: float = 0.0
     seed: int = 1
     scale: tuple[float, float, float] = (1.0, 1.0, 1.0)

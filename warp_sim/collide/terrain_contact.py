@@ -44,10 +44,18 @@ def sphere_fourier_closest(
     terrain_offset: wp.vec3,
     center: wp.vec3,
     start: wp.vec2,
+    reach: float,
 ) -> wp.vec2:
-    """(x, z) of the surface point closest to ``center``, by damped Newton from ``start``."""
+    """(x, z) of the surface point closest to ``center``, by damped Newton from ``start``.
+
+    ``reach`` is the distance from the centre to the surface point straight below it; the
+    closest point can be no farther, so iterates are kept inside that horizontal disc and no
+    step is longer than half of it (this stops Newton from running off to a distant stationary
+    point of F when it starts cold on steep ground).
+    """
     x = start[0]
     z = start[1]
+    max_step = 0.5 * reach + 1.0e-6
     for _it in range(NEWTON_ITERATIONS):
         s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z)
         hx = s.grad[0]
@@ -64,8 +72,16 @@ def sphere_fourier_closest(
             b = hx * hz
             c = 1.0 + hz * hz
             det = a * c - b * b
-        x = x - (c * gx - b * gz) / det
-        z = z - (a * gz - b * gx) / det
+        step = wp.vec2((c * gx - b * gz) / det, (a * gz - b * gx) / det)
+        length = wp.length(step)
+        if length > max_step:
+            step = step * (max_step / length)
+        offset = wp.vec2(x - step[0] - center[0], z - step[1] - center[2])
+        off_len = wp.length(offset)
+        if off_len > reach:
+            offset = offset * (reach / off_len)
+        x = center[0] + offset[0]
+        z = center[2] + offset[1]
     return wp.vec2(x, z)
 
 
@@ -136,12 +152,18 @@ def collide_terrain(
                     start = wp.vec2(x[0], x[2])
                     if terrain_contact_active[slot] != 0:
                         start = terrain_contact_surface[slot]
+                    vertical_gap = wp.abs(x[1] - below.height)
                     xz = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                                terrain_offset, x, start)
+                                                terrain_offset, x, start, vertical_gap)
                     s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
                                        terrain_offset, xz[0], xz[1])
-                    normal = fourier_normal(s.grad)
                     surface = wp.vec3(xz[0], s.height, xz[1])
+                    if wp.length(x - surface) > vertical_gap:
+                        # the search did not improve on the point straight below: use that one
+                        s = below
+                        xz = wp.vec2(x[0], x[2])
+                        surface = wp.vec3(x[0], below.height, x[2])
+                    normal = fourier_normal(s.grad)
                     depth = radius - wp.dot(x - surface, normal)
                     point = x - radius * normal
                     terrain_contact_surface[slot] = xz

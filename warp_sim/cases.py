@@ -1,0 +1,185 @@
+"""Closed-form physics cases shared by the tests and the accuracy benchmarks.
+
+Each builder returns a ready Simulator; the matching exact answer is a small function next to
+it, so a test and a work-precision chart measure exactly the same thing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .builder import Material, ModelBuilder
+from .simulator import SimConfig, Simulator
+from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
+
+GRAVITY = 9.81
+
+
+def _sim(builder: ModelBuilder, device="cpu", **config) -> Simulator:
+    cfg = SimConfig(device=device, **config)
+    return Simulator(builder.finalize(device), cfg)
+
+
+# Free flight ----------------------------------------------------------------------------------
+
+def projectile(integrator: str, dt: float, velocity=(3.0, 4.0, 0.0), height=10.0, device="cpu") -> Simulator:
+    """A sphere thrown from (0, height, 0) with no terrain: x(t) = x0 + v0 t + g t^2 / 2."""
+    b = ModelBuilder()
+    b.set_terrain(NoTerrain())
+    b.add_sphere(0.1, 1.0, position=(0.0, height, 0.0), velocity=velocity)
+    return _sim(b, device, dt=dt, substeps=1, integrator=integrator, gravity=(0.0, -GRAVITY, 0.0))
+
+
+def projectile_exact(t: float, velocity=(3.0, 4.0, 0.0), height=10.0) -> np.ndarray:
+    v = np.asarray(velocity, dtype=np.float64)
+    return np.array([0.0, height, 0.0]) + v * t + 0.5 * np.array([0.0, -GRAVITY, 0.0]) * t * t
+
+
+TUMBLING_HALF_EXTENTS = (0.1, 0.4, 0.2)  # principal moments I_x < I_z < I_y: z is the intermediate axis
+
+
+def tumbling_box(integrator: str, rotation: str, dt: float, omega=(0.3, 0.4, 5.0), device="cpu") -> Simulator:
+    """A free box spinning in zero gravity (default: near the intermediate axis, so it flips)."""
+    b = ModelBuilder()
+    b.set_terrain(NoTerrain())
+    b.add_box(TUMBLING_HALF_EXTENTS, 1.0, angular_velocity=omega)
+    return _sim(b, device, dt=dt, substeps=1, integrator=integrator, rotation=rotation, gravity=(0.0, 0.0, 0.0))
+
+
+def tumbling_reference(omega0, t_end: float, samples: int, half_extents=TUMBLING_HALF_EXTENTS, mass=1.0):
+    """Float64 reference orientation R(t) of a torque-free box (RK4 on quaternions, tiny step).
+
+    Returns (times, rotations) at ``samples`` evenly spaced times in [0, t_end].
+    """
+    from .builder import inertia_box
+
+    inertia = inertia_box(mass, half_extents)
+    angmom = inertia * np.asarray(omega0, dtype=np.float64)  # R(0) = I, so L = I_body omega
+
+    def deriv(q):
+        qn = q / np.linalg.norm(q)
+        rot = quat_matrix(qn)
+        w = rot @ ((rot.T @ angmom) / inertia)
+        x, y, z, s = qn
+        wx, wy, wz = w
+        # 1/2 [w, 0] (x) q, Hamilton product with (x, y, z, w) storage
+        return 0.5 * np.array([
+            wx * s + wy * z - wz * y,
+            wy * s + wz * x - wx * z,
+            wz * s + wx * y - wy * x,
+            -(wx * x + wy * y + wz * z),
+        ])
+
+    times = np.linspace(0.0, t_end, samples)
+    out = [np.eye(3)]
+    q = np.array([0.0, 0.0, 0.0, 1.0])
+    sub = 2000
+    for i in range(1, samples):
+        h = (times[i] - times[i - 1]) / sub
+        for _ in range(sub):
+            k1 = deriv(q)
+            k2 = deriv(q + 0.5 * h * k1)
+            k3 = deriv(q + 0.5 * h * k2)
+            k4 = deriv(q + h * k3)
+            q = q + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            q /= np.linalg.norm(q)
+        out.append(quat_matrix(q))
+    return times, np.array(out)
+
+
+def quat_matrix(q) -> np.ndarray:
+    from .builder import quat_to_matrix
+
+    return quat_to_matrix(q)
+
+
+# Contact --------------------------------------------------------------------------------------
+
+def bounce(restitution: float, drop_height=1.0, radius=0.1, dt=1.0 / 60.0, substeps=8,
+           integrator="semi_implicit", device="cpu") -> Simulator:
+    """A sphere whose lowest point starts ``drop_height`` above the plane y = 0."""
+    b = ModelBuilder(Material(restitution=restitution, friction=0.0))
+    b.set_terrain(PlaneTerrain())
+    b.add_sphere(radius, 1.0, position=(0.0, drop_height + radius, 0.0))
+    return _sim(b, device, dt=dt, substeps=substeps, integrator=integrator)
+
+
+def slope_plane(angle_deg: float) -> PlaneTerrain:
+    """Plane through the origin rising along +x; down-slope is -x."""
+    return PlaneTerrain.from_slope(angle_deg)
+
+
+def slope_frame(angle_deg: float):
+    """(down-slope unit vector, plane normal) for ``slope_plane``."""
+    a = math.radians(angle_deg)
+    down = np.array([-math.cos(a), -math.sin(a), 0.0])
+    normal = np.array([-math.sin(a), math.cos(a), 0.0])
+    return down, normal
+
+
+def rolling_sphere(angle_deg=20.0, friction=0.5, radius=0.25, dt=1.0 / 60.0, substeps=4,
+                   integrator="semi_implicit", device="cpu") -> Simulator:
+    """A sphere released at rest touching a slope: a = 5/7 g sin(theta) if mu >= 2/7 tan(theta)."""
+    b = ModelBuilder(Material(restitution=0.0, friction=friction))
+    b.set_terrain(slope_plane(angle_deg))
+    _, normal = slope_frame(angle_deg)
+    b.add_sphere(radius, 1.0, position=tuple(normal * radius))
+    return _sim(b, device, dt=dt, substeps=substeps, integrator=integrator)
+
+
+def rolling_acceleration(angle_deg: float) -> float:
+    return 5.0 / 7.0 * GRAVITY * math.sin(math.radians(angle_deg))
+
+
+def sliding_box(angle_deg=30.0, friction=0.3, half=0.25, dt=1.0 / 60.0, substeps=4,
+                integrator="semi_implicit", device="cpu") -> Simulator:
+    """A cube released at rest flat on a slope: a = g (sin - mu cos) when tan(theta) > mu, else 0."""
+    b = ModelBuilder(Material(restitution=0.0, friction=friction))
+    b.set_terrain(slope_plane(angle_deg))
+    a = math.radians(angle_deg)
+    _, normal = slope_frame(angle_deg)
+    # rotate the cube about z by the slope angle so its bottom face lies on the plane
+    q = (0.0, 0.0, math.sin(a / 2.0), math.cos(a / 2.0))
+    b.add_box((half, half, half), 1.0, position=tuple(normal * half), orientation=q)
+    return _sim(b, device, dt=dt, substeps=substeps, integrator=integrator)
+
+
+def sliding_acceleration(angle_deg: float, friction: float) -> float:
+    a = math.radians(angle_deg)
+    return max(GRAVITY * (math.sin(a) - friction * math.cos(a)), 0.0)
+
+
+DEFAULT_TERRAIN = FourierTerrain()
+
+
+def terrain_drop(count: int, shape="sphere", terrain: FourierTerrain | None = None, spacing=1.2, clearance=0.5,
+                 radius=0.25, half_extents=(0.25, 0.25, 0.25), rolling_resistance=0.1, friction=0.6,
+                 restitution=0.0, dt=1.0 / 60.0, substeps=4, seed=0, device="cpu") -> Simulator:
+    """``count`` bodies on a square grid above the Fourier terrain; ``shape`` sphere, box or mix.
+
+    This is the benchmark scene too: the same bodies, the same terrain, the same drop heights.
+    """
+    from .builder import random_quaternions
+
+    terrain = terrain or DEFAULT_TERRAIN
+    rng = np.random.default_rng(seed)
+    side = int(math.ceil(math.sqrt(count)))
+    idx = np.arange(count)
+    gx = (idx % side - (side - 1) / 2.0) * spacing
+    gz = (idx // side - (side - 1) / 2.0) * spacing
+    ground = terrain.height(gx, gz)
+    reach = max(radius, float(np.linalg.norm(half_extents)))
+    gy = ground + clearance + reach
+    quats = random_quaternions(rng, count)
+    b = ModelBuilder(Material(restitution=restitution, friction=friction, rolling_resistance=rolling_resistance))
+    b.set_terrain(terrain)
+    for i in range(count):
+        is_sphere = shape == "sphere" or (shape == "mix" and i % 2 == 0)
+        pos = (float(gx[i]), float(gy[i]), float(gz[i]))
+        if is_sphere:
+            b.add_sphere(radius, 1.0, position=pos)
+        else:
+            b.add_box(half_extents, 1.0, position=pos, orientation=tuple(quats[i]))
+    return _sim(b, device, dt=dt, substeps=substeps, seed=seed)
