@@ -37,7 +37,7 @@ def projectile_exact(t: float, velocity=(3.0, 4.0, 0.0), height=10.0) -> np.ndar
     return np.array([0.0, height, 0.0]) + v * t + 0.5 * np.array([0.0, -GRAVITY, 0.0]) * t * t
 
 
-TUMBLING_HALF_EXTENTS = (0.1, 0.4, 0.2)  # principal moments I_x < I_z < I_y: z is the intermediate axis
+TUMBLING_HALF_EXTENTS = (0.1, 0.4, 0.2)  # principal moments I_y < I_z < I_x: z is the intermediate axis
 
 
 def tumbling_box(integrator: str, rotation: str, dt: float, omega=(0.3, 0.4, 5.0), device="cpu") -> Simulator:
