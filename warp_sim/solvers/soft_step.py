@@ -27,8 +27,8 @@ instead allows v_n >= -s / h, exactly closing the gap in one substep.  Push-out 
 
 Friction: Coulomb, the accumulated tangential impulse vector is clamped to the disc
 |J_t| <= mu J_n; each sweep pushes it against the current slip direction t with mass 1/k_t.
-Rolling resistance (spheres): an angular impulse against the rolling spin, clamped to
-c_r r J_n, so balls on uneven ground come to rest as real ones do.
+Rolling resistance (spheres): an angular impulse against the spin (rolling and twisting),
+clamped to c_r r J_n, so balls on uneven ground come to rest as real ones do.
 
 Bodies own their slots, terrain is static, so no two threads ever write the same body: the
 sweeps are true Gauss-Seidel within a body and need no colouring.
@@ -140,9 +140,13 @@ def solve_rolling(
     inv_inertia: wp.mat33,
     limit: float,
 ) -> BodyVelocity:
-    """Angular impulse against the rolling part of the spin, accumulated and clamped to ``limit``."""
+    """Angular impulse against the spin (rolling and twisting about n), accumulated, clamped to ``limit``.
+
+    Real contacts resist both (rolling resistance and torsional friction); resisting only the
+    rolling part leaves a ball spinning in place on its contact point forever.
+    """
     acc = vel.rolling_impulse
-    roll = vel.w - wp.dot(vel.w, n) * n
+    roll = vel.w
     speed = wp.length(roll)
     new_acc = acc
     if speed > 1.0e-9:

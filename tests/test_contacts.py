@@ -1,0 +1,158 @@
+"""Terrain contact against closed forms: bounce, rolling, sliding, static friction, rest on the
+Fourier terrain, no tunnelling; plus the buffer overflow and non-finite guards."""
+
+import math
+
+import numpy as np
+import pytest
+import warp as wp
+
+from warp_sim import (ContactOverflowError, FourierTerrain, ModelBuilder, NonFiniteStateError, SimConfig,
+                      Simulator, cases)
+from warp_sim.builder import Material
+from warp_sim.contacts import Contacts, contact_append
+
+G = cases.GRAVITY
+
+
+def contact_omega(h: float, hertz: float = 30.0) -> float:
+    """Angular frequency of the soft contact spring: 2 pi min(30 Hz, 1 / (4 h))."""
+    return 2.0 * math.pi * min(hertz, 0.25 / h)
+
+
+@pytest.mark.parametrize("restitution", [0.5, 0.8])
+def test_bounce_apex_ratio_is_e_squared(restitution):
+    """Dropped from H = 1 m; the first rebound apex is e^2 H.  Error budget:
+    - restitution uses the approach speed at the start of the impact substep, which lags the
+      true impact speed v = sqrt(2 g H) by at most g h: relative apex error 2 g h / v;
+    - the apex is sampled once per step dt: it can be missed by g dt^2 / 2 (relative to e^2 H);
+    - the soft contact's static deflection g / omega^2 shifts the rest height."""
+    drop, dt, substeps = 1.0, 1.0 / 60.0, 8
+    h = dt / substeps
+    sim = cases.bounce(restitution, drop_height=drop, dt=dt, substeps=substeps)
+    heights = []
+    for _ in range(150):
+        sim.step()
+        heights.append(sim.state.body_pos.numpy()[0][1] - 0.1)
+    heights = np.array(heights)
+    first_rise = int(np.argmax(np.diff(heights) > 0))
+    apex = heights[first_rise: first_rise + 90].max()
+    expected = restitution**2 * drop
+    v = math.sqrt(2 * G * drop)
+    tol = 2 * G * h / v * expected + 0.5 * G * dt * dt + G / contact_omega(h) ** 2
+    assert apex == pytest.approx(expected, abs=tol)
+
+
+def test_sphere_rolls_down_20_degree_plane_at_five_sevenths_g_sin():
+    """mu = 0.5 >= 2/7 tan 20 deg, so it rolls without slipping: a = 5/7 g sin(theta).
+    Symplectic Euler's velocity is exact for constant acceleration, so 2% is a loose bound
+    on anything else (friction iteration, soft contact)."""
+    sim = cases.rolling_sphere(angle_deg=20.0, friction=0.5)
+    t = 1.0
+    sim.step(int(round(t / sim.config.dt)))
+    down, _ = cases.slope_frame(20.0)
+    accel = sim.state.body_vel.numpy()[0] @ down / t
+    assert accel == pytest.approx(cases.rolling_acceleration(20.0), rel=0.02)
+    # and it really rolls: contact point velocity v + omega x r ~ 0
+    _, normal = cases.slope_frame(20.0)
+    v = sim.state.body_vel.numpy()[0]
+    w = sim.angular_velocity()[0]
+    slip = v + np.cross(w, -0.25 * normal)
+    assert np.linalg.norm(slip) < 0.02 * np.linalg.norm(v)
+
+
+def test_box_slides_down_30_degree_plane_at_g_sin_minus_mu_cos():
+    sim = cases.sliding_box(angle_deg=30.0, friction=0.3)
+    t = 1.0
+    sim.step(int(round(t / sim.config.dt)))
+    down, _ = cases.slope_frame(30.0)
+    accel = sim.state.body_vel.numpy()[0] @ down / t
+    assert accel == pytest.approx(cases.sliding_acceleration(30.0, 0.3), rel=0.02)
+
+
+def test_box_below_friction_angle_stays_put():
+    """10 deg < atan(0.3) = 16.7 deg: static friction holds.  The only allowed motion is the
+    soft contact settling along the normal (g / omega^2 ~ 0.3 mm); along the slope it must
+    not creep more than that over 3 s."""
+    sim = cases.sliding_box(angle_deg=10.0, friction=0.3)
+    p0 = sim.state.body_pos.numpy()[0].copy()
+    sim.step(180)
+    down, _ = cases.slope_frame(10.0)
+    creep = (sim.state.body_pos.numpy()[0] - p0) @ down
+    assert abs(creep) < G / contact_omega(sim.substep_dt) ** 2
+    assert np.linalg.norm(sim.state.body_vel.numpy()[0]) < 1e-3
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box"])
+def test_bodies_dropped_on_fourier_terrain_come_to_rest_without_sinking(shape):
+    """36 bodies dropped 0.5 m onto the Fourier terrain (rolling resistance 0.2 so balls stop as
+    real ones do).  After 5 s every body's KE/m is below (g h)^2 / 2, one gravity kick per substep.
+    Penetration bound: the contact is a spring of angular frequency omega; a resting box corner
+    (effective mass >= m/4) sags at most 4 g / omega^2, and after the speculative stop the
+    touchdown speed is at most g h, which compresses it by g h / omega more."""
+    terrain = FourierTerrain(amplitude=0.3)
+    sim = cases.terrain_drop(36, shape, terrain=terrain, rolling_resistance=0.2)
+    h = sim.substep_dt
+    omega = contact_omega(h)
+    depth_bound = 4 * G / omega**2 + G * h / omega
+    deepest = 0.0
+    for _ in range(300):
+        sim.step()
+        deepest = max(deepest, sim.max_penetration())
+    assert deepest < depth_bound
+    ke = sim.kinetic_energy(per_body=True) / sim.model.body_mass
+    assert ke.max() < 0.5 * (G * h) ** 2
+
+
+@pytest.mark.parametrize("angle", [90.0, 45.0, 15.0])
+def test_sphere_thrown_at_20_m_s_does_not_tunnel(angle):
+    """dt = 1/60 and one substep: the ball moves 33 cm per step, more than its 10 cm radius.
+    The speculative margin lets it stop on the surface; its centre must never go below the
+    surface and the measured depth must stay under the contact bound of the rest test."""
+    terrain = FourierTerrain()
+    a = math.radians(angle)
+    b = ModelBuilder(Material(restitution=0.3))
+    b.set_terrain(terrain)
+    b.add_sphere(0.1, 1.0, position=(0.0, float(terrain.height(0.0, 0.0)) + 3.0, 0.0),
+                 velocity=(20 * math.cos(a), -20 * math.sin(a), 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=1))
+    omega = contact_omega(sim.substep_dt)
+    for _ in range(90):
+        sim.step()
+        p = sim.state.body_pos.numpy()[0]
+        assert p[1] > terrain.height(p[0], p[2])
+        assert sim.max_penetration() < 4 * G / omega**2 + G * sim.substep_dt / omega
+
+
+@wp.kernel
+def append_many(contact_pair_count: wp.array(dtype=wp.int32), pair_max: int, written: wp.array(dtype=wp.int32)):
+    index = contact_append(contact_pair_count, pair_max)
+    if index >= 0:
+        written[index] = 1
+
+
+def test_pair_buffer_overflow_is_reported():
+    contacts = Contacts(slot_count=0, pair_max=8, device="cpu")
+    written = wp.zeros(8, dtype=wp.int32)
+    wp.launch(append_many, dim=5, inputs=[contacts.contact_pair_count, contacts.pair_max, written])
+    contacts.check_overflow()
+    wp.launch(append_many, dim=20, inputs=[contacts.contact_pair_count, contacts.pair_max, written])
+    with pytest.raises(ContactOverflowError, match="25 body-body contacts requested, capacity pair_max=8"):
+        contacts.check_overflow()
+    assert written.numpy().sum() == 8
+
+
+def test_non_finite_state_names_body_and_step():
+    """Explicit Euler with an unrepaired matrix on a fast spin grows R by (1 + (h w)^2) per
+    step (see test_integrate): at h w = 1 that doubles |R|^2 each step and overflows float32 by
+    step ~8; the run must stop there naming the box, not carry NaN on."""
+    b = ModelBuilder()
+    b.add_sphere(0.1, 1.0)
+    b.add_box((0.1, 0.4, 0.2), 1.0, angular_velocity=(0.0, 0.0, 100.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=0.01, substeps=1, integrator="explicit_euler", rotation="matrix",
+                                            gravity=(0, 0, 0)))
+    with pytest.raises(NonFiniteStateError, match=r"body 1 \(box\) became non-finite at step \d+") as info:
+        for _ in range(200):
+            sim.step()
+    assert info.value.body == 1
+    assert 1 <= info.value.step <= 200
