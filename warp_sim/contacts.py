@@ -45,8 +45,10 @@ class Contacts:
         terrain_contact_tangent_impulse: accumulated friction impulse, world vec3 [N s].
         terrain_contact_surface: (x, z) of the last closest surface point (sphere warm start).
         terrain_contact_approach: normal velocity before solving [m/s] (restitution target).
-        contact_count: active contacts (terrain + pairs) of the last substep, counted atomically.
-        contact_pair_count: pair contacts requested this substep (may exceed ``pair_max``).
+        contact_pair_count: pair contacts requested this substep, counted atomically (may
+            exceed ``pair_max``; ``check_overflow`` reports that).
+    Terrain contacts are counted on demand from the slots (``count``): the physics never needs
+    the number, so the kernels pay no atomic for it.
     """
 
     def __init__(self, slot_count: int, pair_max: int, device):
@@ -61,7 +63,6 @@ class Contacts:
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
         self.terrain_contact_approach = wp.zeros(n, dtype=float, device=device)
-        self.contact_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.contact_pair_count = wp.zeros(1, dtype=wp.int32, device=device)
         m = max(pair_max, 1)
         self.contact_body0 = wp.zeros(m, dtype=wp.int32, device=device)
@@ -71,8 +72,11 @@ class Contacts:
         self.contact_depth = wp.zeros(m, dtype=float, device=device)
 
     def clear_counts(self):
-        self.contact_count.zero_()
         self.contact_pair_count.zero_()
+
+    def count(self) -> int:
+        terrain = int(np.count_nonzero(self.terrain_contact_active.numpy()[: self.slot_count]))
+        return terrain + min(int(self.contact_pair_count.numpy()[0]), self.pair_max)
 
     def check_overflow(self):
         requested = int(self.contact_pair_count.numpy()[0])

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_terrain
+from .launch import launch
 from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
@@ -48,6 +49,7 @@ class SimConfig:
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
+    convergence_tolerance: float = 1.0e-5
     speculative_margin: float = 0.02
     checkpoints_per_edge: int = 0
     contact_max: int = 0
@@ -63,6 +65,7 @@ class SimConfig:
             damping_ratio=self.damping_ratio,
             max_push_velocity=self.max_push_velocity,
             restitution_threshold=self.restitution_threshold,
+            convergence_tolerance=self.convergence_tolerance,
         )
 
 
@@ -101,7 +104,7 @@ class Simulator:
         m = self.model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
-        wp.launch(
+        launch(
             collide_terrain,
             dim=m.checkpoint_count,
             inputs=[
@@ -116,7 +119,7 @@ class Simulator:
                 # Contacts
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
-                contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_surface, contacts.contact_count,
+                contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_surface,
             ],
             device=self.device,
         )
@@ -232,13 +235,16 @@ class Simulator:
 
     def max_penetration(self) -> float:
         """Deepest penetration of the current state into the terrain [m] (0 if none)."""
-        self._probe.clear_counts()
+        # start the probe's closest-point searches where the live contacts left off
+        wp.copy(self._probe.terrain_contact_active, self.contacts.terrain_contact_active)
+        wp.copy(self._probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
         self.collide(self.state, self._probe, self.substep_dt, 0.0)
         depths = self._probe.active_terrain_depths()
         return float(max(depths.max(), 0.0)) if depths.size else 0.0
 
     def contact_count(self) -> int:
-        return int(self.contacts.contact_count.numpy()[0])
+        """Active contacts of the last substep (terrain slots in use plus body-body pairs)."""
+        return self.contacts.count()
 
     def terrain_record(self) -> dict:
         t = self.model.terrain

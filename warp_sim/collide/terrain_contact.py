@@ -29,10 +29,10 @@ so a fast body stops on the surface instead of passing through it.
 import warp as wp
 
 from ..integrate import world_inv_inertia
-from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, fourier_normal, fourier_sample
+from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_normal, fourier_sample
 from ..types import SHAPE_SPHERE
 
-NEWTON_ITERATIONS = 4
+NEWTON_ITERATIONS = 6
 
 
 @wp.func
@@ -44,25 +44,27 @@ def sphere_fourier_closest(
     terrain_offset: wp.vec3,
     center: wp.vec3,
     start: wp.vec2,
+    start_sample: HeightSample,
     reach: float,
-) -> wp.vec2:
-    """(x, z) of the surface point closest to ``center``, by damped Newton from ``start``.
+) -> tuple[wp.vec2, HeightSample]:
+    """Surface point closest to ``center`` and its sample, by damped Newton from ``start``.
 
-    ``reach`` is the distance from the centre to the surface point straight below it; the
-    closest point can be no farther, so iterates are kept inside that horizontal disc and no
-    step is longer than half of it (this stops Newton from running off to a distant stationary
-    point of F when it starts cold on steep ground).
+    ``reach`` is the distance from the centre to some surface point (the one straight below, or
+    last substep's closest point); the closest point can be no farther, so iterates are kept
+    inside that horizontal disc and no step is longer than half of it.  This stops Newton from
+    running off to a distant stationary point of F when it starts cold on steep ground.  The
+    search stops once a step falls below a few float32 ulps of the coordinates, so a resting
+    sphere costs a single terrain evaluation.
     """
-    x = start[0]
-    z = start[1]
+    xz = start
+    s = start_sample
     max_step = 0.5 * reach + 1.0e-6
     for _it in range(NEWTON_ITERATIONS):
-        s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z)
         hx = s.grad[0]
         hz = s.grad[1]
         dy = s.height - center[1]
-        gx = x - center[0] + dy * hx
-        gz = z - center[2] + dy * hz
+        gx = xz[0] - center[0] + dy * hx
+        gz = xz[1] - center[2] + dy * hz
         a = 1.0 + hx * hx + dy * s.hess[0]
         b = hx * hz + dy * s.hess[1]
         c = 1.0 + hz * hz + dy * s.hess[2]
@@ -74,19 +76,22 @@ def sphere_fourier_closest(
             det = a * c - b * b
         step = wp.vec2((c * gx - b * gz) / det, (a * gz - b * gx) / det)
         length = wp.length(step)
+        if length < 1.0e-6 + 2.0e-7 * (wp.abs(xz[0]) + wp.abs(xz[1])):
+            break
         if length > max_step:
             step = step * (max_step / length)
-        offset = wp.vec2(x - step[0] - center[0], z - step[1] - center[2])
+        offset = wp.vec2(xz[0] - step[0] - center[0], xz[1] - step[1] - center[2])
         off_len = wp.length(offset)
         if off_len > reach:
             offset = offset * (reach / off_len)
-        x = center[0] + offset[0]
-        z = center[2] + offset[1]
-    return wp.vec2(x, z)
+        xz = wp.vec2(center[0] + offset[0], center[2] + offset[1])
+        s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, xz[0], xz[1])
+    return xz, s
 
 
 @wp.kernel
 def collide_terrain(
+    tid_offset: int,
     # Model
     checkpoint_body: wp.array(dtype=wp.int32),
     checkpoint_local: wp.array(dtype=wp.vec3),
@@ -119,9 +124,8 @@ def collide_terrain(
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     terrain_contact_surface: wp.array(dtype=wp.vec2),
-    contact_count: wp.array(dtype=wp.int32),
 ):
-    slot = wp.tid()
+    slot = wp.tid() + tid_offset
     body = checkpoint_body[slot]
     x = body_pos[body]
     rot = body_rot[body]
@@ -144,25 +148,27 @@ def collide_terrain(
             depth = terrain_plane[3] - wp.dot(n, point)
         elif terrain_kind == TERRAIN_FOURIER:
             if is_sphere:
-                below = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
-                                       x[0], x[2])
-                lower_bound = (x[1] - below.height) / wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
-                reach = speculative_margin + h * wp.length(v) + h * h * gravity_length
-                if lower_bound - radius < reach:
-                    start = wp.vec2(x[0], x[2])
-                    if terrain_contact_active[slot] != 0:
-                        start = terrain_contact_surface[slot]
-                    vertical_gap = wp.abs(x[1] - below.height)
-                    xz = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                                terrain_offset, x, start, vertical_gap)
-                    s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                       terrain_offset, xz[0], xz[1])
+                # Start from last substep's closest point when there was one, else from the
+                # point straight below, which also gives the cheap can't-reach test.
+                start = wp.vec2(x[0], x[2])
+                if terrain_contact_active[slot] != 0:
+                    start = terrain_contact_surface[slot]
+                s0 = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+                                    start[0], start[1])
+                reach = wp.length(x - wp.vec3(start[0], s0.height, start[1]))
+                can_touch = True
+                if terrain_contact_active[slot] == 0:
+                    lower_bound = (x[1] - s0.height) / wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
+                    can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
+                if can_touch:
+                    xz, s = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                                   terrain_offset, x, start, s0, reach)
                     surface = wp.vec3(xz[0], s.height, xz[1])
-                    if wp.length(x - surface) > vertical_gap:
-                        # the search did not improve on the point straight below: use that one
-                        s = below
-                        xz = wp.vec2(x[0], x[2])
-                        surface = wp.vec3(x[0], below.height, x[2])
+                    if wp.length(x - surface) > reach:
+                        # the search did not improve on its starting point: use that one
+                        s = s0
+                        xz = start
+                        surface = wp.vec3(start[0], s0.height, start[1])
                     normal = fourier_normal(s.grad)
                     depth = radius - wp.dot(x - surface, normal)
                     point = x - radius * normal
@@ -182,7 +188,6 @@ def collide_terrain(
         terrain_contact_point[slot] = point
         terrain_contact_normal[slot] = normal
         terrain_contact_depth[slot] = depth
-        wp.atomic_add(contact_count, 0, 1)
     else:
         terrain_contact_active[slot] = 0
         terrain_contact_normal_impulse[slot] = 0.0

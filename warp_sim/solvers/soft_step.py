@@ -5,7 +5,8 @@ Per substep h, for each body (SEED.md 3 gives the impulse algebra, Baraff's j fo
     1. pre-kick      v* = v + alpha g h                   (alpha from the integrator)
     2. prepare       store approach speed v_n per contact (restitution needs the value before solving)
     3. warm start    re-apply last substep's accumulated impulses (slot = persistent identity)
-    4. solve         `iterations` Gauss-Seidel sweeps with the soft bias (push-out)
+    4. solve         up to `iterations` Gauss-Seidel sweeps with the soft bias (push-out); a body
+                     stops early once a sweep changes its velocity by less than the tolerance
     5. integrate     x' = x + h v*, orientation by the integrator's scheme
     6. relax         `relax_iterations` sweeps without bias: the push-out velocity moved the body
                      out of the terrain but is removed here, so correcting penetration adds no energy
@@ -201,8 +202,17 @@ def sweep(
     return vel
 
 
+@wp.func
+def sweep_converged(before: BodyVelocity, after: BodyVelocity, reach: float, tolerance: float) -> bool:
+    """A sweep that moved no point of the body by more than ``tolerance`` [m/s] has converged:
+    Gauss-Seidel changes shrink geometrically, so further sweeps would change less still."""
+    change = wp.length(after.v - before.v) + reach * wp.length(after.w - before.w)
+    return change < tolerance
+
+
 @wp.kernel
 def solve_and_integrate(
+    tid_offset: int,
     # Model
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
@@ -224,6 +234,7 @@ def solve_and_integrate(
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
+    convergence_tolerance: float,
     sim_step: wp.array(dtype=wp.int32),
     # Contacts in/out
     terrain_contact_active: wp.array(dtype=wp.int32),
@@ -249,7 +260,7 @@ def solve_and_integrate(
     body_bad_step: wp.array(dtype=wp.int32),
     bad_count: wp.array(dtype=wp.int32),
 ):
-    i = wp.tid()
+    i = wp.tid() + tid_offset
     x = body_pos_in[i]
     q = body_quat_in[i]
     rot = body_rot_in[i]
@@ -290,12 +301,18 @@ def solve_and_integrate(
             vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
 
     zero = wp.vec3(0.0)
+    reach = body_size[i][0]
+    if body_shape[i] != SHAPE_SPHERE:
+        reach = wp.length(body_size[i])
     if touching != 0:
         for _it in range(iterations):
+            before = vel
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 1,
                                 soft, max_push_velocity, zero, zero, terrain_contact_active, terrain_contact_point,
                                 terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
                                 terrain_contact_tangent_impulse)
+            if sweep_converged(before, vel, reach, convergence_tolerance):
+                break
 
     # Drift: positions and orientation move with the solved velocity
     new_angmom = angmom
@@ -308,10 +325,13 @@ def solve_and_integrate(
         shift_v = h * vel.v
         shift_w = h * vel.w
         for _it in range(relax_iterations):
+            before = vel
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 0,
                                 soft, max_push_velocity, shift_v, shift_w, terrain_contact_active, terrain_contact_point,
                                 terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
                                 terrain_contact_tangent_impulse)
+            if sweep_converged(before, vel, reach, convergence_tolerance):
+                break
         # Restitution
         e = body_restitution[i]
         if e > 0.0:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
+from ..launch import launch
 from ..types import INTEGRATORS, ROTATIONS
 from .soft_step import soft_coefficients, solve_and_integrate
 
@@ -22,6 +23,7 @@ class SolverSettings:
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
+    convergence_tolerance: float = 1.0e-5
 
 
 class SoftStepSolver:
@@ -33,7 +35,7 @@ class SoftStepSolver:
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count):
         s = self.settings
-        wp.launch(
+        launch(
             solve_and_integrate,
             dim=model.body_count,
             inputs=[
@@ -44,7 +46,7 @@ class SoftStepSolver:
                 # Settings
                 self.gravity, dt, INTEGRATORS[s.integrator], ROTATIONS[s.rotation], s.iterations,
                 s.relax_iterations, soft_coefficients(dt, s.contact_hertz, s.damping_ratio),
-                s.max_push_velocity, s.restitution_threshold, self.sim_step,
+                s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, self.sim_step,
                 # Contacts
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,

@@ -1,0 +1,71 @@
+"""Shared benchmark plumbing: machine description, the invalid-state gate, result files."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+import warp as wp
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def machine_info(device: str) -> dict:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    dev = wp.get_device(device)
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "device": device,
+        "device_name": dev.name if dev.is_cuda else "cpu",
+        "warp": wp.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def state_gate(sim, depth_slop: float = 0.01, speed_bound: float = 100.0) -> str:
+    """'' when the state is valid, else the reason (Newton-style invalid-state check).
+
+    Finite values, unit quaternions, orthonormal matrices (unless the scene asked for the raw
+    ``matrix`` mode), no body deeper than ``depth_slop`` in the terrain, no speed above the bound.
+    """
+    s = sim.state
+    pos, quat, rot, vel = (a.numpy() for a in (s.body_pos, s.body_quat, s.body_rot, s.body_vel))
+    if not all(np.isfinite(a).all() for a in (pos, quat, rot, vel)):
+        return "non-finite state"
+    if np.abs(np.linalg.norm(quat, axis=1) - 1.0).max() > 1e-4:
+        return "quaternion not unit"
+    if sim.config.rotation != "matrix":
+        err = np.abs(np.einsum("nji,njk->nik", rot, rot) - np.eye(3)).max()
+        if err > 1e-4:
+            return f"rotation not orthonormal ({err:.2g})"
+    depth = sim.max_penetration()
+    if depth > depth_slop:
+        return f"penetration {depth:.3g} m > {depth_slop} m"
+    speed = np.linalg.norm(vel, axis=1).max() if len(vel) else 0.0
+    if speed > speed_bound:
+        return f"speed {speed:.3g} m/s > {speed_bound} m/s"
+    return ""
+
+
+def write_rows(name: str, rows: list[dict], meta: dict) -> tuple[Path, Path]:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    csv_path = RESULTS / f"{name}.csv"
+    with csv_path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
+        writer.writeheader()
+        writer.writerows(rows)
+    json_path = RESULTS / f"{name}.json"
+    json_path.write_text(json.dumps({"machine": meta, "rows": rows}, indent=2))
+    return csv_path, json_path
