@@ -5,7 +5,7 @@ import os
 import pytest
 import warp as wp
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING  # no banner or per-module load lines
 
 
 def pytest_addoption(parser):

@@ -11,7 +11,7 @@ uses.  On CUDA the whole step is captured once as a graph and replayed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
@@ -51,9 +51,7 @@ class SimConfig:
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     speculative_margin: float = 0.02
-    checkpoints_per_edge: int = 0
     contact_max: int = 0
-    extra: dict = field(default_factory=dict)
 
     def solver_settings(self) -> SolverSettings:
         return SolverSettings(
@@ -152,6 +150,8 @@ class Simulator:
             self.step_count += 1
         if check:
             self.check_finite()
+            if self.contacts.pair_max > 0:
+                self.contacts.check_overflow()
 
     def invalidate_graph(self):
         """Call after changing model or settings: the captured graph baked the old values in."""
