@@ -156,3 +156,31 @@ def test_non_finite_state_names_body_and_step():
             sim.step()
     assert info.value.body == 1
     assert 1 <= info.value.step <= 200
+
+
+def test_slipperiness_model_is_coulomb_with_mu_one_minus_gamma():
+    """SEED.md 3 clamps the friction impulse to (1 - gamma) j: gamma = 0.7 slides like mu = 0.3."""
+    b = ModelBuilder(Material(friction_model="slipperiness", slipperiness=0.7))
+    b.set_terrain(cases.slope_plane(30.0))
+    a = math.radians(30.0)
+    _, normal = cases.slope_frame(30.0)
+    b.add_box((0.25, 0.25, 0.25), 1.0, position=tuple(normal * 0.25),
+              orientation=(0.0, 0.0, math.sin(a / 2), math.cos(a / 2)))
+    sim = Simulator(b.finalize(), SimConfig())
+    sim.step(60)
+    down, _ = cases.slope_frame(30.0)
+    accel = sim.state.body_vel.numpy()[0] @ down / 1.0
+    assert accel == pytest.approx(cases.sliding_acceleration(30.0, 0.3), rel=0.02)
+
+
+def test_static_body_never_moves():
+    """Inverse mass and inverse inertia 0: every equation runs and has no effect (SEED.md 2)."""
+    b = ModelBuilder()
+    b.set_terrain(FourierTerrain())
+    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 5.0, 0.0), velocity=(1.0, 0.0, 0.0),
+              angular_velocity=(0.0, 3.0, 0.0), static=True)
+    sim = Simulator(b.finalize(), SimConfig())
+    before = [a.numpy().copy() for a in sim.state.fields()]
+    sim.step(30)
+    for b0, a in zip(before, sim.state.fields()):
+        np.testing.assert_array_equal(a.numpy(), b0)
