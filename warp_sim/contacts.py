@@ -26,7 +26,11 @@ class ContactOverflowError(RuntimeError):
 
 @wp.func
 def contact_append(contact_pair_count: wp.array(dtype=wp.int32), pair_max: int) -> int:
-    """Reserve one pair-contact index; -1 when the buffer is full (the counter still grows)."""
+    """Reserve one pair-contact index; -1 when the buffer is full (the counter still grows).
+
+    Atomic on CUDA and within one CPU launch; not across the chunks of ``warp_sim.launch``
+    (Warp's CPU atomics are plain read-modify-write), so launch appending kernels whole.
+    """
     index = wp.atomic_add(contact_pair_count, 0, 1)
     if index >= pair_max:
         return -1

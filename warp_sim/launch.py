@@ -4,7 +4,11 @@ Warp runs one CPU launch on one thread.  Its launch call releases the GIL, so sp
 index range into chunks launched from a thread pool runs them on separate cores.  Kernels
 launched this way take ``tid_offset`` as their first argument and use ``wp.tid() + tid_offset``.
 Each index is still handled by exactly one thread, so results do not depend on the thread
-count (the only shared writes are integer atomic counters, which commute).
+count.  Kernels launched this way must not count through shared atomics: Warp's CPU
+``atomic_add`` is a plain read-modify-write, so two chunks racing on one counter lose updates
+(measured: 4M increments over 2 threads gave 3.29M).  Variable-length outputs use
+count / scan / write instead (see collide/broad_phase.py); the one shared write left is the
+non-finite flag, which any racing writer still leaves non-zero.
 
 On CUDA it is a single ordinary launch (and so graph-capturable).
 ``WARP_SIM_CPU_THREADS`` overrides the thread count (default: all cores).
