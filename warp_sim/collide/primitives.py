@@ -1,0 +1,583 @@
+"""Narrow phase: pure contact functions for sphere and box pairs (SEED.md 4).
+
+Conventions (the same as ``contacts.py``):
+
+* A pair is (A, B), ordered so that A has the lower shape type (sphere before box);
+  ``collide_pair`` handles (box, sphere) by swapping the two and flipping the normal.
+* ``normal`` is a unit vector from B into A, the direction A must move to separate.  All points
+  of one manifold share it.
+* ``depth`` > 0 is penetration, < 0 a gap.  Contacts are speculative: a point is reported while
+  depth > -margin.  Moving A by (largest depth) * normal brings the pair to touching.
+* A contact point is the midpoint of the two surfaces' deepest (or closest) points, in world
+  space.
+* ``feature`` names the features that produced a point, so a solver can match last step's
+  impulses to this step's points.  A box has 26 features (``box_feature_id``): faces 0..5,
+  edges 6..17, vertices 18..25.  A box-box point is 26 * (feature of A) + (feature of B),
+  whichever box held the reference face and whichever method found it, so an id survives a
+  swap of reference face and a switch between face and edge contact.  A sphere-box point
+  carries the box feature whose Voronoi region holds the centre; sphere-sphere points 0.
+
+Boxes are (centre, rotation whose columns are the body axes in world, half extents); spheres
+are (centre, radius).
+
+Precision: every function works with positions relative to B's centre and adds that centre back
+to the output points only.  The difference of two nearby float32 numbers is exact, so boxes
+stacked at x = 1000 m get the same depths and normals as at the origin.
+"""
+
+import warp as wp
+
+from ..types import SHAPE_BOX, SHAPE_SPHERE
+
+mat43 = wp.types.matrix(shape=(4, 3), dtype=float)
+mat83 = wp.types.matrix(shape=(8, 3), dtype=float)
+vec8i = wp.types.vector(length=8, dtype=wp.int32)
+
+# Centres closer than this fraction of r_a + r_b: their direction is float32 noise.
+COINCIDENT_TOLERANCE = 1.0e-6
+# Edge pairs with |a_i x b_j| below this are parallel: their axis would be rounding noise.
+EDGE_AXIS_MIN_LENGTH = 1.0e-6
+# An edge axis must beat the best face axis by more than this (see collide_box_box).
+EDGE_PREFERENCE_ABSOLUTE = 1.0e-4
+EDGE_PREFERENCE_RELATIVE = 0.05
+BOX_EDGE_ID = 6
+BOX_VERTEX_ID = 18
+BOX_FEATURE_COUNT = 26
+
+
+@wp.struct
+class Manifold:
+    """Up to four contact points of one pair, sharing one normal (see the module docstring).
+
+    Attributes:
+        count: number of valid points, 0..4.
+        normal: unit normal from B into A.
+        point: row i is point i, world [m].
+        depth: penetration per point [m] (< 0: speculative gap).
+        feature: persistent id per point (-1 in unused slots).
+    """
+
+    count: int
+    normal: wp.vec3
+    point: mat43
+    depth: wp.vec4
+    feature: wp.vec4i
+
+
+@wp.func
+def manifold_empty() -> Manifold:
+    m = Manifold()
+    m.count = 0
+    m.normal = wp.vec3(0.0, 1.0, 0.0)
+    m.feature = wp.vec4i(-1, -1, -1, -1)
+    return m
+
+
+@wp.func
+def manifold_single(normal: wp.vec3, point: wp.vec3, depth: float, feature: int) -> Manifold:
+    m = manifold_empty()
+    m.count = 1
+    m.normal = normal
+    m.point[0] = point
+    m.depth[0] = depth
+    m.feature[0] = feature
+    return m
+
+
+@wp.func
+def sign_of(x: float) -> float:
+    """+1 for x >= 0, else -1: a tie picks +, so every choice below is deterministic."""
+    if x < 0.0:
+        return -1.0
+    return 1.0
+
+
+@wp.func
+def unit_axis(axis: int) -> wp.vec3:
+    e = wp.vec3(0.0)
+    e[axis] = 1.0
+    return e
+
+
+@wp.func
+def mat_column(m: wp.mat33, k: int) -> wp.vec3:
+    return wp.vec3(m[0, k], m[1, k], m[2, k])
+
+
+@wp.func
+def box_feature_id(signs: wp.vec3) -> int:
+    """The box feature at box-frame signs (-1, 0 or +1 per axis; only the sign is read).
+
+    A zero means the feature spans that axis.  Two zeros: a face, 2 axis + (1 on the minus
+    side).  One zero: an edge along that axis, 6 + 4 axis + (1 if minus on axis + 1) + (2 if
+    minus on axis + 2).  No zero: a vertex, 18 + (1, 2, 4 for minus on x, y, z).
+    """
+    zeros = int(signs[0] == 0.0) + int(signs[1] == 0.0) + int(signs[2] == 0.0)
+    minus = wp.vec3i(int(signs[0] < 0.0), int(signs[1] < 0.0), int(signs[2] < 0.0))
+    if zeros == 0:
+        return BOX_VERTEX_ID + minus[0] + 2 * minus[1] + 4 * minus[2]
+    # The edge's axis is its zero; the face's axis is its non-zero.
+    axis = int(0)
+    for k in range(3):
+        if (signs[k] == 0.0) == (zeros == 1):
+            axis = k
+    if zeros == 1:
+        return BOX_EDGE_ID + 4 * axis + minus[(axis + 1) % 3] + 2 * minus[(axis + 2) % 3]
+    return 2 * axis + minus[axis]
+
+
+# ----------------------------------------------------------------------------------------------
+# Spheres
+
+
+@wp.func
+def collide_sphere_sphere(pos_a: wp.vec3, radius_a: float, pos_b: wp.vec3, radius_b: float,
+                          margin: float) -> Manifold:
+    """One point on the line of centres; coincident centres separate along +y."""
+    delta = pos_a - pos_b
+    distance = wp.length(delta)
+    normal = wp.vec3(0.0, 1.0, 0.0)
+    if distance > COINCIDENT_TOLERANCE * (radius_a + radius_b):
+        normal = delta / distance
+    else:
+        distance = 0.0
+    depth = radius_a + radius_b - distance
+    if depth <= -margin:
+        return manifold_empty()
+    # Surfaces at pos_a - r_a n and pos_b + r_b n; their midpoint, built relative to B.
+    point = pos_b + 0.5 * (delta + (radius_b - radius_a) * normal)
+    return manifold_single(normal, point, depth, 0)
+
+
+@wp.func
+def slab_side(x: float, half: float) -> float:
+    if x > half:
+        return 1.0
+    if x < -half:
+        return -1.0
+    return 0.0
+
+
+@wp.func
+def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box_rot: wp.mat33,
+                       box_half: wp.vec3, margin: float) -> Manifold:
+    """Sphere A against box B, in the box frame.
+
+    Outside the box the closest box point to the centre q is clamp(q, -h, h); the normal is
+    the unit offset from it and depth = r - |offset|.  Per axis the centre lies below, within
+    or above the box's slab; those three-way signs name the face, edge or vertex whose Voronoi
+    region holds it, which is the feature.
+
+    Inside, the clamp returns q itself (no direction), so the sphere is pushed out through the
+    face of least slack h_k - |q_k|: depth = r + slack, feature that face, so a sphere sinking
+    through a face keeps its id.
+    """
+    local = wp.transpose(box_rot) * (sphere_pos - box_pos)
+    closest = wp.vec3(wp.clamp(local[0], -box_half[0], box_half[0]),
+                      wp.clamp(local[1], -box_half[1], box_half[1]),
+                      wp.clamp(local[2], -box_half[2], box_half[2]))
+    region = wp.vec3(slab_side(local[0], box_half[0]), slab_side(local[1], box_half[1]),
+                     slab_side(local[2], box_half[2]))
+    offset = local - closest
+    distance = wp.length(offset)
+    normal_local = wp.vec3(0.0, 1.0, 0.0)
+    surface = closest
+    depth = float(0.0)
+    if distance > 0.0:
+        normal_local = offset / distance
+        depth = radius - distance
+    else:
+        axis = int(0)
+        slack = box_half[0] - wp.abs(local[0])
+        for k in range(1, 3):
+            if box_half[k] - wp.abs(local[k]) < slack:
+                slack = box_half[k] - wp.abs(local[k])
+                axis = k
+        side = sign_of(local[axis])
+        normal_local = side * unit_axis(axis)
+        region = normal_local
+        surface = local + (side * box_half[axis] - local[axis]) * unit_axis(axis)
+        depth = radius + slack
+    if depth <= -margin:
+        return manifold_empty()
+    # Midpoint of the box surface point and the sphere's deepest point.
+    point_local = 0.5 * (surface + local - radius * normal_local)
+    return manifold_single(box_rot * normal_local, box_pos + box_rot * point_local, depth,
+                           box_feature_id(region))
+
+
+# ----------------------------------------------------------------------------------------------
+# Box-box by separating axes
+
+
+@wp.func
+def box_support_radius(rot: wp.mat33, half: wp.vec3, axis: wp.vec3) -> float:
+    """Half-width of the box's projection on a unit axis: sum_k h_k |r_k . axis|."""
+    local = wp.transpose(rot) * axis
+    return half[0] * wp.abs(local[0]) + half[1] * wp.abs(local[1]) + half[2] * wp.abs(local[2])
+
+
+@wp.func
+def box_pair_separation(delta: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, rot_b: wp.mat33, half_b: wp.vec3,
+                        axis: wp.vec3) -> float:
+    """Gap between the two projections on a unit axis (< 0: they overlap by that much)."""
+    return wp.abs(wp.dot(delta, axis)) - box_support_radius(rot_a, half_a, axis) \
+        - box_support_radius(rot_b, half_b, axis)
+
+
+@wp.struct
+class ClipPolygon:
+    """The incident face while it is clipped, in reference-face coordinates (x, y, height z).
+
+    ``source`` says what produced a vertex: 0..3 incident vertex v; 4 + 4 e + p the crossing of
+    incident edge e with side plane p; 20 + c reference corner c (where two side planes meet,
+    bit 0: minus x, bit 1: minus y).  ``edge`` says what the polygon edge leaving a vertex lies
+    on: incident edge 0..3 or side plane 4 + p.  Side plane p bounds coordinate p // 2 from the
+    side +1 (even p) or -1 (odd p).
+    """
+
+    count: int
+    point: mat83
+    source: vec8i
+    edge: vec8i
+
+
+@wp.func
+def polygon_push(poly: ClipPolygon, point: wp.vec3, source: int, edge: int) -> ClipPolygon:
+    out = poly
+    if out.count < 8:
+        out.point[out.count] = point
+        out.source[out.count] = source
+        out.edge[out.count] = edge
+        out.count = out.count + 1
+    return out
+
+
+@wp.func
+def crossing_source(edge: int, plane: int) -> int:
+    if edge < 4:
+        return 4 + 4 * edge + plane
+    # A polygon edge lying on side plane edge - 4 meets `plane` at a reference corner.
+    x_plane = wp.min(edge - 4, plane)
+    y_plane = wp.max(edge - 4, plane)
+    return 20 + x_plane % 2 + 2 * (y_plane % 2)
+
+
+@wp.func
+def clip_polygon_plane(poly: ClipPolygon, plane: int, limit: float) -> ClipPolygon:
+    """One Sutherland-Hodgman pass against side plane ``plane``: keep side * coord <= limit.
+
+    A crossing is made only when the ends lie strictly on opposite sides, so a vertex lying on
+    the plane is kept once, not doubled.  A convex polygon gains at most one vertex per pass,
+    so four passes take the incident quad to at most 8 vertices.
+    """
+    axis = plane // 2
+    side = 1.0 - 2.0 * float(plane % 2)
+    out = ClipPolygon()
+    out.count = 0
+    for i in range(poly.count):
+        p = poly.point[i]
+        q = poly.point[(i + 1) % poly.count]
+        fp = side * p[axis] - limit
+        fq = side * q[axis] - limit
+        if fp <= 0.0:
+            out = polygon_push(out, p, poly.source[i], poly.edge[i])
+        if (fp < 0.0 and fq > 0.0) or (fp > 0.0 and fq < 0.0):
+            x = p + (fp / (fp - fq)) * (q - p)
+            # Exactly on the plane, so the later passes see it there.
+            x = x + (side * limit - x[axis]) * unit_axis(axis)
+            # Leaving: the clipped polygon goes on along the plane; entering: along the edge.
+            edge = poly.edge[i]
+            if fp < 0.0:
+                edge = 4 + plane
+            out = polygon_push(out, x, crossing_source(poly.edge[i], plane), edge)
+    return out
+
+
+@wp.func
+def area2(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
+    """Twice the signed area of triangle abc projected on the x-y plane."""
+    return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+
+@wp.func
+def polygon_pick_four(poly: ClipPolygon) -> wp.vec4i:
+    """Four of 5..8 points: the deepest, the farthest from it, the largest triangle with those
+    two, then the point adding the most area outside that triangle.  The four span as much of
+    the patch as the points allow, which is what keeps a resting box from rocking."""
+    i0 = int(0)
+    for i in range(1, poly.count):
+        if poly.point[i][2] < poly.point[i0][2]:
+            i0 = i
+    p0 = poly.point[i0]
+    i1 = int(-1)
+    best = float(-1.0)
+    for i in range(poly.count):
+        d = poly.point[i] - p0
+        if i != i0 and d[0] * d[0] + d[1] * d[1] > best:
+            best = d[0] * d[0] + d[1] * d[1]
+            i1 = i
+    p1 = poly.point[i1]
+    i2 = int(-1)
+    best = float(-1.0)
+    for i in range(poly.count):
+        if i != i0 and i != i1 and wp.abs(area2(p0, p1, poly.point[i])) > best:
+            best = wp.abs(area2(p0, p1, poly.point[i]))
+            i2 = i
+    p2 = poly.point[i2]
+    # With sigma the triangle's orientation, q lies outside edge (a, b) when
+    # sigma * area2(a, b, q) < 0, and adds -sigma * area2(a, b, q) / 2 there.
+    sigma = sign_of(area2(p0, p1, p2))
+    i3 = int(-1)
+    best = float(-1.0e30)
+    for i in range(poly.count):
+        q = poly.point[i]
+        gain = -wp.min(sigma * area2(p0, p1, q), wp.min(sigma * area2(p1, p2, q), sigma * area2(p2, p0, q)))
+        if i != i0 and i != i1 and i != i2 and gain > best:
+            best = gain
+            i3 = i
+    return wp.vec4i(i0, i1, i2, i3)
+
+
+@wp.func
+def face_vertex_signs(axis: int, side: float, vertex: int) -> wp.vec3:
+    """Box-frame signs of vertex 0..3 of face (axis, side); going round, the vertices sit at
+    (+, +), (-, +), (-, -), (+, -) on axes (axis + 1, axis + 2)."""
+    s1 = 1.0
+    if vertex == 1 or vertex == 2:
+        s1 = -1.0
+    s2 = 1.0
+    if vertex >= 2:
+        s2 = -1.0
+    return side * unit_axis(axis) + s1 * unit_axis((axis + 1) % 3) + s2 * unit_axis((axis + 2) % 3)
+
+
+@wp.func
+def clip_source_features(source: int, inc_axis: int, inc_side: float, ref_axis: int,
+                         ref_side: float) -> wp.vec2i:
+    """(incident feature, reference feature) of a clipped vertex: an incident vertex on the
+    reference face, an incident edge across a reference edge, or the incident face under a
+    reference corner.  Signs of an edge are the sum of its end vertices' (0 along the edge)."""
+    ref_face = ref_side * unit_axis(ref_axis)
+    if source < 4:
+        inc_vertex = face_vertex_signs(inc_axis, inc_side, source)
+        return wp.vec2i(box_feature_id(inc_vertex), box_feature_id(ref_face))
+    if source < 20:
+        e = (source - 4) // 4
+        p = (source - 4) % 4
+        inc_edge = face_vertex_signs(inc_axis, inc_side, e) \
+            + face_vertex_signs(inc_axis, inc_side, (e + 1) % 4)
+        ref_edge = ref_face + (1.0 - 2.0 * float(p % 2)) * unit_axis((ref_axis + 1 + p // 2) % 3)
+        return wp.vec2i(box_feature_id(inc_edge), box_feature_id(ref_edge))
+    c = source - 20
+    ref_corner = ref_face + (1.0 - 2.0 * float(c % 2)) * unit_axis((ref_axis + 1) % 3) \
+        + (1.0 - 2.0 * float(c // 2)) * unit_axis((ref_axis + 2) % 3)
+    return wp.vec2i(box_feature_id(inc_side * unit_axis(inc_axis)), box_feature_id(ref_corner))
+
+
+@wp.func
+def box_face_contact(ref_pos: wp.vec3, ref_rot: wp.mat33, ref_half: wp.vec3, ref_axis: int,
+                     ref_outward: wp.vec3, inc_pos: wp.vec3, inc_rot: wp.mat33, inc_half: wp.vec3,
+                     ref_is_b: int, normal: wp.vec3, origin: wp.vec3, margin: float) -> Manifold:
+    """Face contact: clip the incident face of one box against the reference face of the other.
+
+    Positions are relative to ``origin`` (B's centre).  The incident face is the one whose
+    outward normal is most opposed to the reference face's, ``ref_outward``.  Its vertices are
+    written in reference-face coordinates (x, y along the face, z = height above it) and
+    clipped to the face, |x| <= h1, |y| <= h2.  Each survivor with depth -z > -margin becomes
+    the midpoint of itself and its foot on the reference face, (x, y, z / 2).
+    """
+    k1 = (ref_axis + 1) % 3
+    k2 = (ref_axis + 2) % 3
+    t1 = mat_column(ref_rot, k1)
+    t2 = mat_column(ref_rot, k2)
+    face_centre = ref_pos + ref_half[ref_axis] * ref_outward
+    frame = wp.matrix_from_rows(t1, t2, ref_outward)
+
+    inc_axis = int(0)
+    best = float(-1.0)
+    for j in range(3):
+        if wp.abs(wp.dot(mat_column(inc_rot, j), ref_outward)) > best:
+            best = wp.abs(wp.dot(mat_column(inc_rot, j), ref_outward))
+            inc_axis = j
+    inc_side = -sign_of(wp.dot(mat_column(inc_rot, inc_axis), ref_outward))
+    poly = ClipPolygon()
+    poly.count = 0
+    for v in range(4):
+        local = wp.cw_mul(face_vertex_signs(inc_axis, inc_side, v), inc_half)
+        poly = polygon_push(poly, frame * (inc_pos + inc_rot * local - face_centre), v, v)
+    for plane in range(4):
+        poly = clip_polygon_plane(poly, plane, ref_half[(ref_axis + 1 + plane // 2) % 3])
+
+    kept = ClipPolygon()
+    kept.count = 0
+    for i in range(poly.count):
+        if -poly.point[i][2] > -margin:
+            kept = polygon_push(kept, poly.point[i], poly.source[i], poly.edge[i])
+    pick = wp.vec4i(0, 1, 2, 3)
+    if kept.count > 4:
+        pick = polygon_pick_four(kept)
+
+    ref_side = sign_of(wp.dot(mat_column(ref_rot, ref_axis), ref_outward))
+    m = manifold_empty()
+    m.normal = normal
+    m.count = wp.min(kept.count, 4)
+    for n in range(m.count):
+        p = kept.point[pick[n]]
+        m.point[n] = origin + face_centre + p[0] * t1 + p[1] * t2 + (0.5 * p[2]) * ref_outward
+        m.depth[n] = -p[2]
+        pair = clip_source_features(kept.source[pick[n]], inc_axis, inc_side, ref_axis, ref_side)
+        if ref_is_b == 1:
+            m.feature[n] = BOX_FEATURE_COUNT * pair[0] + pair[1]
+        else:
+            m.feature[n] = BOX_FEATURE_COUNT * pair[1] + pair[0]
+    return m
+
+
+@wp.func
+def box_support_edge(pos: wp.vec3, rot: wp.mat33, half: wp.vec3, axis: int, direction: wp.vec3):
+    """Centre and box-frame signs of the edge along ``axis`` furthest along ``direction``."""
+    signs = wp.vec3(0.0)
+    for n in range(2):
+        k = (axis + 1 + n) % 3
+        signs[k] = sign_of(wp.dot(mat_column(rot, k), direction))
+    return pos + rot * wp.cw_mul(signs, half), signs
+
+
+@wp.func
+def segment_closest(pa: wp.vec3, u: wp.vec3, ha: float, pb: wp.vec3, v: wp.vec3, hb: float) -> wp.vec2:
+    """Parameters (s, t) of the closest points pa + s u, pb + t v, |s| <= ha, |t| <= hb.
+
+    Zeroing the gradient of |r + s u - t v|^2 (r = pa - pb, |u| = |v| = 1):
+        s = t (u.v) - u.r,   t = s (u.v) + v.r,
+    jointly solved over 1 - (u.v)^2 = |u x v|^2 (the cross product keeps the precision that
+    1 - (u.v)^2 would cancel away).  Clamp s, take t from it, clamp t, redo s.
+    """
+    r = pa - pb
+    b = wp.dot(u, v)
+    ur = wp.dot(u, r)
+    vr = wp.dot(v, r)
+    denom = wp.length_sq(wp.cross(u, v))
+    s = float(0.0)
+    if denom > 1.0e-12:
+        s = wp.clamp((b * vr - ur) / denom, -ha, ha)
+    t = wp.clamp(s * b + vr, -hb, hb)
+    s = wp.clamp(t * b - ur, -ha, ha)
+    return wp.vec2(s, t)
+
+
+@wp.func
+def box_edge_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: int, rot_b: wp.mat33,
+                     half_b: wp.vec3, edge_b: int, normal: wp.vec3, depth: float,
+                     origin: wp.vec3) -> Manifold:
+    """Edge contact: one point halfway between the closest points of the supporting edges (A's
+    edge furthest towards B, B's furthest towards A); the depth is the axis overlap."""
+    centre_a, signs_a = box_support_edge(pos_a, rot_a, half_a, edge_a, -normal)
+    centre_b, signs_b = box_support_edge(wp.vec3(0.0), rot_b, half_b, edge_b, normal)
+    u = mat_column(rot_a, edge_a)
+    v = mat_column(rot_b, edge_b)
+    st = segment_closest(centre_a, u, half_a[edge_a], centre_b, v, half_b[edge_b])
+    point = origin + 0.5 * (centre_a + st[0] * u + centre_b + st[1] * v)
+    return manifold_single(normal, point, depth,
+                           BOX_FEATURE_COUNT * box_feature_id(signs_a) + box_feature_id(signs_b))
+
+
+@wp.func
+def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.vec3, rot_b: wp.mat33,
+                    half_b: wp.vec3, margin: float) -> Manifold:
+    """Box A against box B by the separating-axis test, then a face or an edge manifold.
+
+    Candidate axes: the three face normals of each box and the nine cross products a_i x b_j
+    of their edge directions.  For boxes these are all the face normals of the Minkowski
+    difference, so the largest separation s = |d.L| - r_A(L) - r_B(L) over them (d = pos_a -
+    pos_b) is the exact penetration depth -s, or a lower bound of the gap when separated.  An
+    axis with s >= margin proves the pair too far apart for a contact.
+
+    Face/edge ties are common and harmless in exact arithmetic (aligned stacks: a_x x b_z =
+    -a_y), but float32 rounding then lets an edge axis win by an ulp, and an edge manifold is a
+    single point between two arbitrary parallel edges: a phantom contact (mujoco_warp issue
+    #1597).  Nearly flat stacks (a tilt of 1e-3 rad, footprints crossing) have edge axes that
+    win by a few tilt-times-size, and one point is a poor support for a resting box there.  So
+    an edge axis must beat the best face axis by EDGE_PREFERENCE_ABSOLUTE * (sum of half
+    extents) + EDGE_PREFERENCE_RELATIVE * |s_face| (the 5 % of ODE's box-box "fudge factor"),
+    which also bounds how much deeper than the true depth a face manifold chosen this way can
+    be.  Parallel edge pairs (|a_i x b_j| < EDGE_AXIS_MIN_LENGTH) have no axis.  A tie between
+    face axes keeps the first (A's before B's).
+    """
+    delta = pos_a - pos_b
+    face_separation = float(-1.0e30)
+    face_axis = wp.vec3(0.0)
+    face_index = int(0)
+    for k in range(6):
+        axis = mat_column(rot_a, k % 3)
+        if k >= 3:
+            axis = mat_column(rot_b, k % 3)
+        s = box_pair_separation(delta, rot_a, half_a, rot_b, half_b, axis)
+        if s > face_separation:
+            face_separation = s
+            face_axis = axis
+            face_index = k
+    if face_separation >= margin:
+        return manifold_empty()
+
+    edge_separation = float(-1.0e30)
+    edge_axis = wp.vec3(0.0)
+    edge_a = int(0)
+    edge_b = int(0)
+    for i in range(3):
+        for j in range(3):
+            axis = wp.cross(mat_column(rot_a, i), mat_column(rot_b, j))
+            length = wp.length(axis)
+            if length >= EDGE_AXIS_MIN_LENGTH:
+                s = box_pair_separation(delta, rot_a, half_a, rot_b, half_b, axis / length)
+                if s > edge_separation:
+                    edge_separation = s
+                    edge_axis = axis / length
+                    edge_a = i
+                    edge_b = j
+    if edge_separation >= margin:
+        return manifold_empty()
+
+    size = half_a[0] + half_a[1] + half_a[2] + half_b[0] + half_b[1] + half_b[2]
+    tolerance = EDGE_PREFERENCE_ABSOLUTE * size + EDGE_PREFERENCE_RELATIVE * wp.abs(face_separation)
+    if edge_separation > face_separation + tolerance:
+        normal = sign_of(wp.dot(delta, edge_axis)) * edge_axis
+        return box_edge_contact(delta, rot_a, half_a, edge_a, rot_b, half_b, edge_b, normal, -edge_separation,
+                                pos_b)
+    normal = sign_of(wp.dot(delta, face_axis)) * face_axis
+    if face_index < 3:
+        # A's face towards B is the reference: its outward normal points from A to B.
+        return box_face_contact(delta, rot_a, half_a, face_index, -normal, wp.vec3(0.0), rot_b, half_b, 0,
+                                normal, pos_b, margin)
+    return box_face_contact(wp.vec3(0.0), rot_b, half_b, face_index - 3, normal, delta, rot_a, half_a, 1,
+                            normal, pos_b, margin)
+
+
+# ----------------------------------------------------------------------------------------------
+# Dispatch (the thesis's box-box method, a baseline, is in primitives_thesis.py)
+
+PAIR_FUNCTIONS = {
+    (SHAPE_SPHERE, SHAPE_SPHERE): collide_sphere_sphere,
+    (SHAPE_SPHERE, SHAPE_BOX): collide_sphere_box,
+    (SHAPE_BOX, SHAPE_BOX): collide_box_box,
+}
+"""Pair functions by (shape A, shape B), A the lower type; (box, sphere) is (sphere, box) swapped."""
+
+
+@wp.func
+def collide_pair(shape_a: int, pos_a: wp.vec3, rot_a: wp.mat33, size_a: wp.vec3, shape_b: int, pos_b: wp.vec3,
+                 rot_b: wp.mat33, size_b: wp.vec3, margin: float) -> Manifold:
+    """Any pair through one call; ``size`` is the radius in [0] for a sphere, the half extents
+    for a box.  (box, sphere) runs as (sphere, box) and flips the normal back, so the result
+    keeps this pair's (A, B) convention; points, depths and features are unchanged."""
+    if shape_a == SHAPE_SPHERE and shape_b == SHAPE_SPHERE:
+        return collide_sphere_sphere(pos_a, size_a[0], pos_b, size_b[0], margin)
+    if shape_a == SHAPE_SPHERE and shape_b == SHAPE_BOX:
+        return collide_sphere_box(pos_a, size_a[0], pos_b, rot_b, size_b, margin)
+    if shape_a == SHAPE_BOX and shape_b == SHAPE_SPHERE:
+        m = collide_sphere_box(pos_b, size_b[0], pos_a, rot_a, size_a, margin)
+        m.normal = -m.normal
+        return m
+    if shape_a == SHAPE_BOX and shape_b == SHAPE_BOX:
+        return collide_box_box(pos_a, rot_a, size_a, pos_b, rot_b, size_b, margin)
+    return manifold_empty()
