@@ -3,7 +3,8 @@
     python bench/terrain_drop.py                       # N = 1k, 10k, 100k spheres and boxes on cpu
     python bench/terrain_drop.py --counts 1000 --shapes sphere --device cuda
 
-Each case builds ``warp_sim.cases.terrain_drop`` (the scene the tests use), simulates
+Each case builds ``warp_sim.cases.terrain_drop`` (the scene the tests use; terrain contact
+only unless ``--body-contact``), simulates
 ``--settle`` seconds so the bodies are on the ground and in contact, then times ``--steps``
 steps (wall clock around sim.step with a device sync, kernel compile excluded).  A run whose
 final state fails the invalid-state gate is recorded as failed, never as fast.
@@ -24,8 +25,9 @@ from bench.common import RESULTS, machine_info, state_gate, write_rows  # noqa: 
 from warp_sim import cases  # noqa: E402
 
 
-def measure(shape: str, count: int, dt: float, substeps: int, settle: float, steps: int, device: str) -> dict:
-    sim = cases.terrain_drop(count, shape, dt=dt, substeps=substeps, device=device)
+def measure(shape: str, count: int, dt: float, substeps: int, settle: float, steps: int, device: str,
+            body_contact: bool = False) -> dict:
+    sim = cases.terrain_drop(count, shape, dt=dt, substeps=substeps, device=device, body_contact=body_contact)
     sim.step(1)  # compile
     settle_steps = int(round(settle / dt))
     for _ in range(settle_steps):
@@ -40,6 +42,7 @@ def measure(shape: str, count: int, dt: float, substeps: int, settle: float, ste
     return {
         "shape": shape,
         "bodies": count,
+        "body_contact": body_contact,
         "dt": dt,
         "substeps": substeps,
         "steps": steps,
@@ -82,6 +85,7 @@ def main(argv=None) -> int:
     p.add_argument("--settle", type=float, default=1.5, help="simulated seconds before timing")
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--device", default="cpu")
+    p.add_argument("--body-contact", action="store_true", help="also collide bodies with each other")
     p.add_argument("--tag", default="", help="suffix for the result file names")
     args = p.parse_args(argv)
     wp.config.quiet = True
@@ -92,7 +96,7 @@ def main(argv=None) -> int:
 
     cases_list = [(s, n) for n in args.counts for s in args.shapes]
     for shape, count in tqdm(cases_list, desc="terrain_drop", unit="case"):
-        row = measure(shape, count, args.dt, args.substeps, args.settle, args.steps, args.device)
+        row = measure(shape, count, args.dt, args.substeps, args.settle, args.steps, args.device, args.body_contact)
         rows.append(row)
         tqdm.write(f"{shape:6s} N={count:>7d}: {row['steps_per_s']:>9.1f} steps/s "
                    f"{row['body_steps_per_s']:>12,d} body-steps/s  [{row['status']}]")

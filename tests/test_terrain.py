@@ -124,7 +124,6 @@ def test_sphere_query_finds_the_true_closest_point():
     centers = np.stack([xz[:, 0], terrain.height(xz[:, 0], xz[:, 1]) + rng.uniform(-0.3, 0.6, 60), xz[:, 1]], 1)
     sim = sphere_sim(terrain, centers, radius)
     probe = sim._probe
-    probe.clear_counts()
     sim.collide(sim.state, probe, 1.0 / 240.0, 10.0)
     depth = probe.terrain_contact_depth.numpy()
     g = np.linspace(-1.2, 1.2, 481)

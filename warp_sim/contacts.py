@@ -6,12 +6,16 @@ Two parts, because the two kinds of contact have different shapes:
   slot (its closest-point query), a box owns one per checkpoint on its surface.  The slot index
   is the contact's persistent identity, so impulses warm-start with no matching step, and the
   per-body solver finds a body's contacts as a contiguous range.  Slots cannot overflow.
-* Body-body contacts are appended through an atomic counter into a buffer of ``pair_max``
-  entries.  An append past the end is dropped and counted; ``check_overflow`` turns that into
-  a ``ContactOverflowError`` naming the capacity and the demand.
+* Body-body contacts follow the broad phase's sorted candidate pairs: pair p owns point slots
+  4p .. 4p+3 (a manifold has at most 4 points), so the narrow phase writes without any shared
+  counter (Warp's CPU atomics are not safe across the chunks of ``warp_sim.launch``).  The
+  buffer holds ``pair_max`` pairs; more candidates than that is a ``ContactOverflowError``
+  naming the capacity and the demand.  Last substep's pairs, features and impulses are kept in
+  ``prev_*`` arrays so new points inherit the impulses of the same features (warm starting).
 
 Sign convention (shared with the collision functions): ``depth`` > 0 is penetration, < 0 a
-speculative gap; ``normal`` points from the other object (terrain or body1) into body0.
+speculative gap; ``normal`` points from the other object (terrain, or body j of pair (i, j))
+into the body (body i).
 """
 
 from __future__ import annotations
@@ -19,22 +23,13 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .solvers.coloring import COLOR_COUNT
+
+POINTS_PER_PAIR = 4
+
 
 class ContactOverflowError(RuntimeError):
     pass
-
-
-@wp.func
-def contact_append(contact_pair_count: wp.array(dtype=wp.int32), pair_max: int) -> int:
-    """Reserve one pair-contact index; -1 when the buffer is full (the counter still grows).
-
-    Atomic on CUDA and within one CPU launch; not across the chunks of ``warp_sim.launch``
-    (Warp's CPU atomics are plain read-modify-write), so launch appending kernels whole.
-    """
-    index = wp.atomic_add(contact_pair_count, 0, 1)
-    if index >= pair_max:
-        return -1
-    return index
 
 
 class Contacts:
@@ -49,8 +44,11 @@ class Contacts:
         terrain_contact_tangent_impulse: accumulated friction impulse, world vec3 [N s].
         terrain_contact_surface: (x, z) of the last closest surface point (sphere warm start).
         terrain_contact_approach: normal velocity before solving [m/s] (restitution target).
-        contact_pair_count: pair contacts requested this substep, counted atomically (may
-            exceed ``pair_max``; ``check_overflow`` reports that).
+        pair_body: (i, j), i < j, per candidate pair (a copy of the broad phase's sorted list).
+        pair_count: candidate pairs this substep, int32[1]; pair_point_count: points per pair.
+        pair_normal: per pair, from body j into body i.
+        pair_point, pair_depth, pair_feature: per point slot (4 per pair).
+        pair_normal_impulse, pair_tangent_impulse, pair_approach: solver accumulators per point.
     Terrain contacts are counted on demand from the slots (``count``): the physics never needs
     the number, so the kernels pay no atomic for it.
     """
@@ -67,27 +65,43 @@ class Contacts:
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
         self.terrain_contact_approach = wp.zeros(n, dtype=float, device=device)
-        self.contact_pair_count = wp.zeros(1, dtype=wp.int32, device=device)
         m = max(pair_max, 1)
-        self.contact_body0 = wp.zeros(m, dtype=wp.int32, device=device)
-        self.contact_body1 = wp.zeros(m, dtype=wp.int32, device=device)
-        self.contact_point = wp.zeros(m, dtype=wp.vec3, device=device)
-        self.contact_normal = wp.zeros(m, dtype=wp.vec3, device=device)
-        self.contact_depth = wp.zeros(m, dtype=float, device=device)
-
-    def clear_counts(self):
-        self.contact_pair_count.zero_()
+        k = m * POINTS_PER_PAIR
+        self.pair_count = wp.zeros(1, dtype=wp.int32, device=device)
+        self.pair_demand = wp.zeros(1, dtype=wp.int64, device=device)
+        self.pair_body = wp.zeros(m, dtype=wp.vec2i, device=device)
+        self.pair_point_count = wp.zeros(m, dtype=wp.int32, device=device)
+        self.pair_normal = wp.zeros(m, dtype=wp.vec3, device=device)
+        self.pair_point = wp.zeros(k, dtype=wp.vec3, device=device)
+        self.pair_depth = wp.zeros(k, dtype=float, device=device)
+        self.pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
+        self.pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
+        self.pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
+        self.pair_approach = wp.zeros(k, dtype=float, device=device)
+        self.prev_pair_count = wp.zeros(1, dtype=wp.int32, device=device)
+        self.prev_pair_body = wp.zeros(m, dtype=wp.vec2i, device=device)
+        self.prev_pair_point_count = wp.zeros(m, dtype=wp.int32, device=device)
+        self.prev_pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
+        self.prev_pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
+        self.prev_pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
+        # graph colouring of the pairs (solvers/coloring.py): colour c holds
+        # color_pairs_sorted[color_start[c]:color_start[c + 1]]; the last colour is the overflow set
+        self.color_start = wp.zeros(COLOR_COUNT + 2, dtype=wp.int32, device=device)
+        self.color_pairs_sorted = wp.zeros(m, dtype=wp.int32, device=device)
 
     def count(self) -> int:
         terrain = int(np.count_nonzero(self.terrain_contact_active.numpy()[: self.slot_count]))
-        return terrain + min(int(self.contact_pair_count.numpy()[0]), self.pair_max)
+        pairs = int(self.pair_count.numpy()[0]) if self.pair_max > 0 else 0
+        return terrain + int(self.pair_point_count.numpy()[:pairs].sum())
 
     def check_overflow(self):
-        requested = int(self.contact_pair_count.numpy()[0])
-        if requested > self.pair_max:
+        if self.pair_max == 0:
+            return
+        demand = int(self.pair_demand.numpy()[0])
+        if demand > self.pair_max:
             raise ContactOverflowError(
-                f"contact buffer overflow: {requested} body-body contacts requested, capacity "
-                f"pair_max={self.pair_max}; raise [sim] contact_max"
+                f"contact buffer overflow: {demand} body-body candidate pairs found, capacity "
+                f"contact_max={self.pair_max}; raise [sim] contact_max"
             )
 
     def active_terrain_depths(self) -> np.ndarray:

@@ -2,10 +2,13 @@
 
 One step of ``dt`` is ``substeps`` substeps of h = dt / substeps, each:
 
-    contacts.clear -> collide_terrain(state_0) -> solver.step(state_0 -> state_1) -> swap
+    collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
+    -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
 
-The terrain kernel is launched only when the scene has a terrain, so a scene pays for what it
-uses.  On CUDA the whole step is captured once as a graph and replayed.
+The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
+has body-body contact (``body_contact``), so a scene pays for what it uses.  On CUDA a step
+without body-body contact is captured once as a graph and replayed; with it, the colour sizes
+are read back each substep, so the launches are issued directly.
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_terrain
+from .collide.broad_phase import BROAD_PHASES
+from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
 from .launch import launch
 from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
@@ -51,6 +56,8 @@ class SimConfig:
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     speculative_margin: float = 0.02
+    body_contact: bool = True
+    broad_phase: str = "grid"
     contact_max: int = 0
 
     def solver_settings(self) -> SolverSettings:
@@ -74,13 +81,21 @@ def advance_step_counter(sim_step: wp.array(dtype=wp.int32)):
 
 class Simulator:
     def __init__(self, model: Model, config: SimConfig):
+        if config.broad_phase not in BROAD_PHASES:
+            raise ValueError(f"broad_phase must be one of {', '.join(BROAD_PHASES)}, got {config.broad_phase!r}")
         self.model = model
         self.config = config
         self.device = wp.get_device(config.device)
-        self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device)
+        self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
-        self.contacts = model.contacts(config.contact_max)
-        self._probe = model.contacts(0)
+        dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
+        self.pairs = None
+        capacity = 0
+        if config.body_contact and model.body_count >= 2 and dynamic >= 1:
+            capacity = config.contact_max or default_pair_capacity(model.body_count)
+            self.pairs = PairContactPipeline(model, config.broad_phase, capacity, self.device)
+        self.contacts = model.contacts(capacity)
+        self._probe = model.contacts(capacity)
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
         self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.step_count = 0
@@ -105,6 +120,7 @@ class Simulator:
         launch(
             collide_terrain,
             dim=m.checkpoint_count,
+            key=contacts,
             inputs=[
                 # Model
                 m.checkpoint_body, m.checkpoint_local, m.body_shape, m.body_size, m.body_inv_mass,
@@ -125,10 +141,14 @@ class Simulator:
     def _simulate_one_step(self):
         h = self.substep_dt
         for _ in range(self.config.substeps):
-            self.contacts.clear_counts()
             self.collide(self.states[0], self.contacts, h, self.config.speculative_margin)
+            color_sizes = None
+            if self.pairs is not None:
+                color_sizes = self.pairs.collide(self.states[0], self.contacts, self.config.speculative_margin)
             self.solver.step(self.model, self.states[0], self.states[1], self.contacts, h, self.body_bad_step,
-                             self.bad_count)
+                             self.bad_count, color_sizes)
+            if self.pairs is not None:
+                self.pairs.store(self.contacts)
             self.states[0], self.states[1] = self.states[1], self.states[0]
         if self.config.substeps % 2 == 1:
             # Keep the captured graph's output in the buffer it started from.
@@ -139,7 +159,7 @@ class Simulator:
     def step(self, count: int = 1, check: bool = True):
         """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""
         for _ in range(count):
-            if self.device.is_cuda:
+            if self.device.is_cuda and self.pairs is None:
                 if self.graph is None:
                     with wp.ScopedCapture(device=self.device) as capture:
                         self._simulate_one_step()
@@ -150,8 +170,7 @@ class Simulator:
             self.step_count += 1
         if check:
             self.check_finite()
-            if self.contacts.pair_max > 0:
-                self.contacts.check_overflow()
+            self.contacts.check_overflow()
 
     def invalidate_graph(self):
         """Call after changing model or settings: the captured graph baked the old values in."""
@@ -169,7 +188,7 @@ class Simulator:
 
     def reset(self):
         self.states = [self.model.state(), self.model.state()]
-        self.contacts = self.model.contacts(self.config.contact_max)
+        self.contacts = self.model.contacts(self.pairs.capacity if self.pairs else 0)
         self.body_bad_step.fill_(-1)
         self.bad_count.zero_()
         self.solver.sim_step.zero_()
@@ -187,9 +206,13 @@ class Simulator:
 
     def _persistent_arrays(self) -> list:
         c = self.contacts
-        return [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-                c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                c.terrain_contact_surface, c.terrain_contact_approach, self.solver.sim_step]
+        arrays = [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+                  c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                  c.terrain_contact_surface, c.terrain_contact_approach, self.solver.sim_step]
+        if self.pairs is not None:
+            arrays += [c.prev_pair_count, c.prev_pair_body, c.prev_pair_point_count, c.prev_pair_feature,
+                       c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]
+        return arrays
 
     def restore(self, snap: dict):
         for dst, src in zip(self._persistent_arrays(), snap["arrays"]):
@@ -210,7 +233,8 @@ class Simulator:
             if not hasattr(self.config, key):
                 raise ValueError(f"unknown simulation setting {key!r}")
             setattr(self.config, key, value)
-        self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device)
+        self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device,
+                                     self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
         self.invalidate_graph()
 
@@ -234,13 +258,16 @@ class Simulator:
         return ke if per_body else float(ke.sum())
 
     def max_penetration(self) -> float:
-        """Deepest penetration of the current state into the terrain [m] (0 if none)."""
+        """Deepest penetration of the current state into the terrain or another body [m] (0 if none)."""
         # start the probe's closest-point searches where the live contacts left off
         wp.copy(self._probe.terrain_contact_active, self.contacts.terrain_contact_active)
         wp.copy(self._probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
         self.collide(self.state, self._probe, self.substep_dt, 0.0)
         depths = self._probe.active_terrain_depths()
-        return float(max(depths.max(), 0.0)) if depths.size else 0.0
+        deepest = float(max(depths.max(), 0.0)) if depths.size else 0.0
+        if self.pairs is not None:
+            deepest = max(deepest, self.pairs.probe_depth(self.state, self._probe))
+        return deepest
 
     def contact_count(self) -> int:
         """Active contacts of the last substep (terrain slots in use plus body-body pairs)."""

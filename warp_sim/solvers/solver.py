@@ -1,4 +1,9 @@
-"""Solver facade: ``step(model, state_in, state_out, contacts, dt)`` advances one substep."""
+"""Solver facade: ``step(model, state_in, state_out, contacts, dt)`` advances one substep.
+
+A scene without body-body contact runs the fused per-body kernel (soft_step.py): one launch
+per substep.  With body-body contact the same algorithm runs as the staged launches of
+staged.py and pair_solve.py, colour by colour.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,10 @@ import warp as wp
 
 from ..launch import launch
 from ..types import INTEGRATORS, ROTATIONS
+from .coloring import COLOR_COUNT
+from .pair_solve import MODE_RELAX, MODE_RESTITUTION, MODE_SOLVE, MODE_WARM_START, pair_pass
 from .soft_step import soft_coefficients, solve_and_integrate
+from .staged import finalize_bodies, integrate_positions, prepare_bodies, terrain_restitution, terrain_sweep
 
 
 @dataclass
@@ -27,17 +35,40 @@ class SolverSettings:
 
 
 class SoftStepSolver:
-    def __init__(self, settings: SolverSettings, gravity, device):
+    def __init__(self, settings: SolverSettings, gravity, device, body_count: int = 0):
         self.settings = settings
         self.gravity = wp.vec3(*gravity)
         self.device = device
         self.sim_step = wp.zeros(1, dtype=wp.int32, device=device)
+        n = max(body_count, 1)
+        self.solver_v = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_w = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_w0 = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_inv_inertia = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.solver_rolling = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_shift_v = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_shift_w = wp.zeros(n, dtype=wp.vec3, device=device)
 
-    def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count):
+    def _soft(self, dt: float):
+        # one vec3 object per dt, so recorded launches see an unchanged argument
+        if getattr(self, "_soft_dt", None) != dt:
+            self._soft_dt = dt
+            self._soft_value = soft_coefficients(dt, self.settings.contact_hertz, self.settings.damping_ratio)
+        return self._soft_value
+
+    def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None):
+        """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path."""
+        if color_sizes is None:
+            self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
+        else:
+            self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes)
+
+    def _step_fused(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count):
         s = self.settings
         launch(
             solve_and_integrate,
             dim=model.body_count,
+            key=self,
             inputs=[
                 # Model
                 model.body_shape, model.body_size, model.body_inv_mass, model.body_inertia,
@@ -45,7 +76,7 @@ class SoftStepSolver:
                 model.body_rolling_resistance, model.body_checkpoint_start, model.body_checkpoint_count,
                 # Settings
                 self.gravity, dt, INTEGRATORS[s.integrator], ROTATIONS[s.rotation], s.iterations,
-                s.relax_iterations, soft_coefficients(dt, s.contact_hertz, s.damping_ratio),
+                s.relax_iterations, self._soft(dt),
                 s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, self.sim_step,
                 # Contacts
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
@@ -60,3 +91,72 @@ class SoftStepSolver:
             ],
             device=self.device,
         )
+
+    def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes):
+        s = self.settings
+        m, c = model, contacts
+        n = m.body_count
+        integrator = INTEGRATORS[s.integrator]
+        soft = self._soft(dt)
+        dev = self.device
+
+        launch(prepare_bodies, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
+            self.gravity, dt, integrator,
+            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse, c.terrain_contact_approach,
+            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0], device=dev)
+
+        def terrain(use_bias: int):
+            launch(terrain_sweep, n, key=self, inputs=[
+                m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_rolling_resistance,
+                m.body_checkpoint_start, m.body_checkpoint_count,
+                dt, use_bias, soft, s.max_push_velocity,
+                state_in.body_pos,
+                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
+                c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v, self.solver_w,
+                self.solver_rolling], device=dev)
+
+        def pairs(mode: int):
+            for color, size in enumerate(color_sizes):
+                if size == 0:
+                    continue
+                dim = 1 if color == COLOR_COUNT else size
+                launch(pair_pass, dim, key=self, inputs=[
+                    mode, color, c.color_start, c.color_pairs_sorted,
+                    m.body_inv_mass, m.body_friction, m.body_restitution,
+                    dt, soft, s.max_push_velocity, s.restitution_threshold,
+                    state_in.body_pos,
+                    c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
+                    c.pair_normal_impulse, c.pair_tangent_impulse, c.pair_approach,
+                    self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v,
+                    self.solver_w], device=dev)
+
+        pairs(MODE_WARM_START)
+        for _ in range(s.iterations):
+            terrain(1)
+            pairs(MODE_SOLVE)
+        launch(integrate_positions, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator, ROTATIONS[s.rotation],
+            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
+            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=dev)
+        for _ in range(s.relax_iterations):
+            terrain(0)
+            pairs(MODE_RELAX)
+        launch(terrain_restitution, n, key=self, inputs=[
+            m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
+            s.restitution_threshold, state_in.body_pos,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_normal_impulse, c.terrain_contact_approach,
+            self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
+        pairs(MODE_RESTITUTION)
+        launch(finalize_bodies, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
+            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0,
+            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
+            body_bad_step, bad_count], device=dev)
+

@@ -1,0 +1,84 @@
+"""Body-body contact for one substep: broad phase -> narrow phase -> warm-start carry -> colouring.
+
+Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel; the
+only host read is the colour sizes the solver needs to size its launches (on CUDA the launches
+could use the capacity instead and stay graph-capturable).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from ..launch import launch
+from ..solvers.coloring import COLOR_COUNT, color_pairs
+from .broad_phase import make_broad_phase
+from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs
+
+
+class PairContactPipeline:
+    def __init__(self, model, broad_phase: str, capacity: int, device):
+        self.model = model
+        self.device = device
+        self.capacity = capacity
+        self.broad = make_broad_phase(broad_phase, model.body_count, capacity, device)
+        n = max(model.body_count, 1)
+        self.body_color_mask = wp.zeros(n, dtype=wp.int32, device=device)
+        self.pair_color = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
+        self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
+
+    def collide(self, state, contacts, margin: float) -> list[int]:
+        """Find this substep's pairs and manifolds; returns the pair count of each colour."""
+        m = self.model
+        self.broad.run(state.body_pos, m.body_bound_radius, m.body_inv_mass, margin)
+        wp.copy(contacts.pair_count, self.broad.pair_count)
+        wp.copy(contacts.pair_demand, self.broad.pair_demand)
+        launch(collide_pairs, self.capacity, key=self, inputs=[
+            m.body_shape, m.body_size, margin, state.body_pos, state.body_rot,
+            self.broad.pair_body, self.broad.pair_count,
+            contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
+            contacts.pair_depth, contacts.pair_feature], device=self.device)
+        launch(carry_pair_impulses, self.capacity, key=self, inputs=[
+            contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
+            contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
+            contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
+            contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
+        wp.launch(color_pairs, dim=1, device=self.device, inputs=[
+            m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
+            self.body_color_mask, self.pair_color, self.color_cursor,
+            contacts.color_start, contacts.color_pairs_sorted])
+        starts = contacts.color_start.numpy()
+        return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
+
+    def probe_depth(self, state, probe) -> float:
+        """Deepest body-body penetration of ``state`` [m], found afresh (broad + narrow phase only)."""
+        m = self.model
+        self.broad.run(state.body_pos, m.body_bound_radius, m.body_inv_mass, 0.0)
+        launch(collide_pairs, self.capacity, [
+            m.body_shape, m.body_size, 0.0, state.body_pos, state.body_rot,
+            self.broad.pair_body, self.broad.pair_count,
+            probe.pair_body, probe.pair_point_count, probe.pair_normal, probe.pair_point,
+            probe.pair_depth, probe.pair_feature], self.device)
+        count = min(int(self.broad.pair_count.numpy()[0]), self.capacity)
+        if count == 0:
+            return 0.0
+        points = probe.pair_point_count.numpy()[:count]
+        depth = probe.pair_depth.numpy()[: 4 * count].reshape(count, 4)
+        valid = np.arange(4)[None, :] < points[:, None]
+        return float(max(depth[valid].max(), 0.0)) if valid.any() else 0.0
+
+    def store(self, contacts):
+        """Keep this substep's pairs and impulses as the next substep's warm-start source."""
+        launch(store_pairs, self.capacity, key=self, inputs=[
+            contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
+            contacts.pair_normal_impulse, contacts.pair_tangent_impulse,
+            contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
+            contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse],
+            device=self.device)
+
+
+def default_pair_capacity(body_count: int) -> int:
+    """Room for every body to touch ~8 others (a sphere in a dense pile touches up to 12,
+    but each pair is shared by two bodies)."""
+    return int(8 * body_count + 64)
+

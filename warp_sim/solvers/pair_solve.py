@@ -1,0 +1,213 @@
+"""Pair stages of the staged soft-step solver: one thread per pair of one colour.
+
+See staged.py for the algebra.  A launch handles one colour; its pair range is read on the
+device from ``color_start`` (so the launch sequence can be captured in a CUDA graph).  The
+overflow colour's pairs may share bodies, so one thread walks them in order.
+"""
+
+import warp as wp
+
+from .coloring import COLOR_COUNT
+
+wp.set_module_options({"enable_backward": False})
+
+POINTS = 4
+
+MODE_WARM_START = 0
+MODE_SOLVE = 1
+MODE_RELAX = 2
+MODE_RESTITUTION = 3
+
+
+@wp.struct
+class PairVelocity:
+    vi: wp.vec3
+    wi: wp.vec3
+    vj: wp.vec3
+    wj: wp.vec3
+
+
+@wp.func
+def apply_pair_impulse(vel: PairVelocity, impulse: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv_mj: float,
+                       inv_ii: wp.mat33, inv_ij: wp.mat33) -> PairVelocity:
+    out = vel
+    out.vi = vel.vi + inv_mi * impulse
+    out.wi = vel.wi + inv_ii * wp.cross(ri, impulse)
+    out.vj = vel.vj - inv_mj * impulse
+    out.wj = vel.wj - inv_ij * wp.cross(rj, impulse)
+    return out
+
+
+@wp.func
+def relative_velocity(vel: PairVelocity, ri: wp.vec3, rj: wp.vec3) -> wp.vec3:
+    return vel.vi + wp.cross(vel.wi, ri) - vel.vj - wp.cross(vel.wj, rj)
+
+
+@wp.func
+def normal_mass_inverse(n: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv_mj: float, inv_ii: wp.mat33,
+                        inv_ij: wp.mat33) -> float:
+    rni = wp.cross(ri, n)
+    rnj = wp.cross(rj, n)
+    return inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
+
+
+@wp.func
+def solve_one_pair(
+    p: int,
+    mode: int,
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    h: float,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    restitution_threshold: float,
+    body_pos: wp.array(dtype=wp.vec3),
+    pair_body: wp.array(dtype=wp.vec2i),
+    pair_point_count: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
+    pair_normal_impulse: wp.array(dtype=float),
+    pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    pair_approach: wp.array(dtype=float),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    ij = pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    n = pair_normal[p]
+    inv_mi = body_inv_mass[i]
+    inv_mj = body_inv_mass[j]
+    inv_ii = solver_inv_inertia[i]
+    inv_ij = solver_inv_inertia[j]
+    xi = body_pos[i]
+    xj = body_pos[j]
+    vel = PairVelocity()
+    vel.vi = solver_v[i]
+    vel.wi = solver_w[i]
+    vel.vj = solver_v[j]
+    vel.wj = solver_w[j]
+    friction = wp.sqrt(body_friction[i] * body_friction[j])
+    e = wp.max(body_restitution[i], body_restitution[j])
+
+    for k in range(pair_point_count[p]):
+        slot = p * POINTS + k
+        point = pair_point[slot]
+        ri = point - xi
+        rj = point - xj
+        acc = pair_normal_impulse[slot]
+        k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+        if mode == MODE_WARM_START:
+            pair_approach[slot] = wp.dot(relative_velocity(vel, ri, rj), n)
+            vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
+                                     inv_ij)
+        elif mode == MODE_RESTITUTION:
+            approach = pair_approach[slot]
+            if e > 0.0 and approach < -restitution_threshold and acc > 0.0:
+                vn = wp.dot(relative_velocity(vel, ri, rj), n)
+                new_acc = wp.max(acc - (vn + e * approach) / k_n, 0.0)
+                pair_normal_impulse[slot] = new_acc
+                vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+        else:
+            separation = -pair_depth[slot]
+            if mode == MODE_RELAX:
+                dpi = solver_shift_v[i] + wp.cross(solver_shift_w[i], ri)
+                dpj = solver_shift_v[j] + wp.cross(solver_shift_w[j], rj)
+                separation = separation + wp.dot(dpi - dpj, n)
+            # Non-penetration
+            bias = float(0.0)
+            mass_scale = float(1.0)
+            impulse_scale = float(0.0)
+            if separation > 0.0:
+                bias = separation / h
+            elif mode == MODE_SOLVE:
+                bias = wp.max(soft[0] * separation, -max_push_velocity)
+                mass_scale = soft[1]
+                impulse_scale = soft[2]
+            vn = wp.dot(relative_velocity(vel, ri, rj), n)
+            lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
+            new_acc = wp.max(acc + lam, 0.0)
+            pair_normal_impulse[slot] = new_acc
+            vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+            # Friction: accumulated tangential impulse clamped to the Coulomb disc
+            vr = relative_velocity(vel, ri, rj)
+            vt = vr - wp.dot(vr, n) * n
+            old_t = pair_tangent_impulse[slot]
+            old_t = old_t - wp.dot(old_t, n) * n
+            new_t = old_t
+            slip = wp.length(vt)
+            if slip > 1.0e-9:
+                tangent = vt / slip
+                k_t = normal_mass_inverse(tangent, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                new_t = old_t - (slip / k_t) * tangent
+            limit = friction * new_acc
+            mag = wp.length(new_t)
+            if mag > limit:
+                new_t = new_t * (limit / mag)
+            pair_tangent_impulse[slot] = new_t
+            vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+
+    # Only dynamic bodies are written: a static body may sit in many pairs of one colour.
+    if inv_mi > 0.0:
+        solver_v[i] = vel.vi
+        solver_w[i] = vel.wi
+    if inv_mj > 0.0:
+        solver_v[j] = vel.vj
+        solver_w[j] = vel.wj
+
+
+@wp.kernel
+def pair_pass(
+    tid_offset: int,
+    mode: int,
+    color: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    # Settings
+    h: float,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    restitution_threshold: float,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    # Contacts in/out
+    pair_body: wp.array(dtype=wp.vec2i),
+    pair_point_count: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
+    pair_normal_impulse: wp.array(dtype=float),
+    pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    pair_approach: wp.array(dtype=float),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid() + tid_offset
+    begin = color_start[color]
+    end = color_start[color + 1]
+    first = begin + t
+    last = first + 1
+    if color == COLOR_COUNT:
+        if t != 0:
+            return
+        last = end
+    if first >= end:
+        return
+    for index in range(first, last):
+        solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution, h, soft,
+                       max_push_velocity, restitution_threshold, body_pos, pair_body, pair_point_count,
+                       pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
+                       pair_approach, solver_inv_inertia, solver_shift_v, solver_shift_w, solver_v, solver_w)

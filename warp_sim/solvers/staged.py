@@ -1,0 +1,300 @@
+"""Soft-step solver stages for scenes with body-body contact.
+
+The same algorithm as soft_step.py (read its docstring for the derivation), split into
+launches because a pair couples two bodies: per-body stages run one thread per body, pair
+stages one thread per pair of one colour (pairs of a colour share no dynamic body).
+
+    prepare (body) -> warm start (pairs, by colour)
+    -> iterations x [terrain sweep (body), pair sweep (each colour)]       with soft bias
+    -> integrate positions (body)
+    -> relax_iterations x [terrain sweep (body), pair sweep (each colour)] no bias
+    -> restitution (body, then pairs by colour) -> finalize (body)
+
+Pair contact algebra, for a point with arms r_i = p - x_i, r_j = p - x_j and normal n (j -> i):
+
+    v_rel = (v_i + w_i x r_i) - (v_j + w_j x r_j),   v_n = v_rel . n
+    k_n   = 1/m_i + 1/m_j + (r_i x n) . I_i^-1 (r_i x n) + (r_j x n) . I_j^-1 (r_j x n)
+
+impulse P = lambda n goes +P to i and -P to j.  Friction mixes as mu = sqrt(mu_i mu_j) and
+restitution as max(e_i, e_j) (Box2D's rules).  During relax the gap is corrected by the
+relative drift of the two contact points, as Box2D does with its body delta positions.
+"""
+
+import warp as wp
+
+from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
+from ..types import SHAPE_SPHERE
+from .soft_step import BodyVelocity, apply_impulse, sweep
+
+wp.set_module_options({"enable_backward": False})
+
+POINTS = 4
+
+
+@wp.func
+def load_velocity(i: int, solver_v: wp.array(dtype=wp.vec3), solver_w: wp.array(dtype=wp.vec3),
+                  solver_rolling: wp.array(dtype=wp.vec3)) -> BodyVelocity:
+    vel = BodyVelocity()
+    vel.v = solver_v[i]
+    vel.w = solver_w[i]
+    vel.rolling_impulse = solver_rolling[i]
+    return vel
+
+
+@wp.kernel
+def prepare_bodies(
+    tid_offset: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
+    gravity: wp.vec3,
+    h: float,
+    integrator: int,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.mat33),
+    body_vel: wp.array(dtype=wp.vec3),
+    body_angmom: wp.array(dtype=wp.vec3),
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    terrain_contact_approach: wp.array(dtype=float),
+    # Out
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_rolling: wp.array(dtype=wp.vec3),
+    solver_w0: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid() + tid_offset
+    solver_rolling[i] = wp.vec3(0.0)
+    inv_mass = body_inv_mass[i]
+    if inv_mass == 0.0:
+        solver_v[i] = wp.vec3(0.0)
+        solver_w[i] = wp.vec3(0.0)
+        solver_w0[i] = wp.vec3(0.0)
+        solver_inv_inertia[i] = wp.mat33(0.0)
+        return
+    inv_inertia = world_inv_inertia(body_rot[i], body_inv_inertia[i])
+    vel = BodyVelocity()
+    vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
+    vel.w = inv_inertia * body_angmom[i]
+    solver_w0[i] = vel.w
+    x = body_pos[i]
+    start = body_checkpoint_start[i]
+    for slot in range(start, start + body_checkpoint_count[i]):
+        if terrain_contact_active[slot] != 0:
+            n = terrain_contact_normal[slot]
+            arm = terrain_contact_point[slot] - x
+            terrain_contact_approach[slot] = wp.dot(vel.v + wp.cross(vel.w, arm), n)
+            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
+            vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
+    solver_v[i] = vel.v
+    solver_w[i] = vel.w
+    solver_inv_inertia[i] = inv_inertia
+
+
+@wp.kernel
+def terrain_sweep(
+    tid_offset: int,
+    # Model
+    body_shape: wp.array(dtype=wp.int32),
+    body_size: wp.array(dtype=wp.vec3),
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_rolling_resistance: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
+    h: float,
+    use_bias: int,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_rolling: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid() + tid_offset
+    count = body_checkpoint_count[i]
+    if body_inv_mass[i] == 0.0 or count == 0:
+        return
+    rolling = float(0.0)
+    if body_shape[i] == SHAPE_SPHERE:
+        rolling = body_rolling_resistance[i] * body_size[i][0]
+    shift_v = wp.vec3(0.0)
+    shift_w = wp.vec3(0.0)
+    if use_bias == 0:
+        shift_v = solver_shift_v[i]
+        shift_w = solver_shift_w[i]
+    vel = load_velocity(i, solver_v, solver_w, solver_rolling)
+    vel = sweep(body_checkpoint_start[i], count, body_pos[i], vel, body_inv_mass[i], solver_inv_inertia[i],
+                body_friction[i], rolling, h, use_bias, soft, max_push_velocity, shift_v, shift_w,
+                terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth,
+                terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
+    solver_v[i] = vel.v
+    solver_w[i] = vel.w
+    solver_rolling[i] = vel.rolling_impulse
+
+
+@wp.kernel
+def integrate_positions(
+    tid_offset: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    # Settings
+    h: float,
+    integrator: int,
+    rotation: int,
+    # State in
+    body_pos_in: wp.array(dtype=wp.vec3),
+    body_quat_in: wp.array(dtype=wp.quat),
+    body_rot_in: wp.array(dtype=wp.mat33),
+    body_angmom_in: wp.array(dtype=wp.vec3),
+    # Solver in/out
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_w0: wp.array(dtype=wp.vec3),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    # State out
+    body_pos_out: wp.array(dtype=wp.vec3),
+    body_quat_out: wp.array(dtype=wp.quat),
+    body_rot_out: wp.array(dtype=wp.mat33),
+):
+    i = wp.tid() + tid_offset
+    x = body_pos_in[i]
+    q = body_quat_in[i]
+    rot = body_rot_in[i]
+    if body_inv_mass[i] == 0.0:
+        body_pos_out[i] = x
+        body_quat_out[i] = q
+        body_rot_out[i] = rot
+        solver_shift_v[i] = wp.vec3(0.0)
+        solver_shift_w[i] = wp.vec3(0.0)
+        return
+    v = solver_v[i]
+    w = solver_w[i]
+    # L changes only by what the contacts did (w - w0): free flight keeps L bit-exact
+    angmom = body_angmom_in[i] + world_inertia(rot, body_inertia[i]) * (w - solver_w0[i])
+    q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], angmom, h, integrator, rotation)
+    body_pos_out[i] = x + h * v
+    body_quat_out[i] = q_new
+    body_rot_out[i] = rot_new
+    solver_shift_v[i] = h * v
+    solver_shift_w[i] = h * w
+
+
+@wp.kernel
+def terrain_restitution(
+    tid_offset: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    restitution_threshold: float,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_approach: wp.array(dtype=float),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid() + tid_offset
+    inv_mass = body_inv_mass[i]
+    e = body_restitution[i]
+    if inv_mass == 0.0 or e == 0.0:
+        return
+    x = body_pos[i]
+    inv_inertia = solver_inv_inertia[i]
+    vel = BodyVelocity()
+    vel.v = solver_v[i]
+    vel.w = solver_w[i]
+    start = body_checkpoint_start[i]
+    for slot in range(start, start + body_checkpoint_count[i]):
+        approach = terrain_contact_approach[slot]
+        acc = terrain_contact_normal_impulse[slot]
+        if terrain_contact_active[slot] != 0 and approach < -restitution_threshold and acc > 0.0:
+            n = terrain_contact_normal[slot]
+            arm = terrain_contact_point[slot] - x
+            vn = wp.dot(vel.v + wp.cross(vel.w, arm), n)
+            rn = wp.cross(arm, n)
+            k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
+            new_acc = wp.max(acc - (vn + e * approach) / k_n, 0.0)
+            terrain_contact_normal_impulse[slot] = new_acc
+            vel = apply_impulse(vel, (new_acc - acc) * n, arm, inv_mass, inv_inertia)
+    solver_v[i] = vel.v
+    solver_w[i] = vel.w
+
+
+@wp.kernel
+def finalize_bodies(
+    tid_offset: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    # Settings
+    gravity: wp.vec3,
+    h: float,
+    integrator: int,
+    sim_step: wp.array(dtype=wp.int32),
+    # State in
+    body_rot_in: wp.array(dtype=wp.mat33),
+    body_vel_in: wp.array(dtype=wp.vec3),
+    body_angmom_in: wp.array(dtype=wp.vec3),
+    # Solver in
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_w0: wp.array(dtype=wp.vec3),
+    # State in/out (positions written by integrate_positions)
+    body_pos_out: wp.array(dtype=wp.vec3),
+    body_rot_out: wp.array(dtype=wp.mat33),
+    body_vel_out: wp.array(dtype=wp.vec3),
+    body_angmom_out: wp.array(dtype=wp.vec3),
+    # Out
+    body_bad_step: wp.array(dtype=wp.int32),
+    bad_count: wp.array(dtype=wp.int32),
+):
+    i = wp.tid() + tid_offset
+    if body_inv_mass[i] == 0.0:
+        body_vel_out[i] = body_vel_in[i]
+        body_angmom_out[i] = body_angmom_in[i]
+        return
+    v = solver_v[i] + ((1.0 - pre_kick_fraction(integrator)) * h) * gravity
+    angmom = body_angmom_in[i] + world_inertia(body_rot_in[i], body_inertia[i]) * (solver_w[i] - solver_w0[i])
+    body_vel_out[i] = v
+    body_angmom_out[i] = angmom
+    x = body_pos_out[i]
+    rot = body_rot_out[i]
+    total = wp.dot(x, x) + wp.dot(v, v) + wp.dot(angmom, angmom) + wp.ddot(rot, rot)
+    if not wp.isfinite(total):
+        if body_bad_step[i] < 0:
+            body_bad_step[i] = sim_step[0]
+            wp.atomic_add(bad_count, 0, 1)
