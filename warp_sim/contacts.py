@@ -43,12 +43,11 @@ class Contacts:
         terrain_contact_normal_impulse: accumulated normal impulse [N s], kept for warm start.
         terrain_contact_tangent_impulse: accumulated friction impulse, world vec3 [N s].
         terrain_contact_surface: (x, z) of the last closest surface point (sphere warm start).
-        terrain_contact_approach: normal velocity before solving [m/s] (restitution target).
         pair_body: (i, j), i < j, per candidate pair (a copy of the broad phase's sorted list).
         pair_count: candidate pairs this substep, int32[1]; pair_point_count: points per pair.
         pair_normal: per pair, from body j into body i.
         pair_point, pair_depth, pair_feature: per point slot (4 per pair).
-        pair_normal_impulse, pair_tangent_impulse, pair_approach: solver accumulators per point.
+        pair_normal_impulse, pair_tangent_impulse: solver accumulators per point.
     Terrain contacts are counted on demand from the slots (``count``): the physics never needs
     the number, so the kernels pay no atomic for it.
     """
@@ -64,7 +63,6 @@ class Contacts:
         self.terrain_contact_normal_impulse = wp.zeros(n, dtype=float, device=device)
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
-        self.terrain_contact_approach = wp.zeros(n, dtype=float, device=device)
         m = max(pair_max, 1)
         k = m * POINTS_PER_PAIR
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=device)
@@ -77,7 +75,6 @@ class Contacts:
         self.pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
         self.pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
         self.pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
-        self.pair_approach = wp.zeros(k, dtype=float, device=device)
         self.prev_pair_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.prev_pair_body = wp.zeros(m, dtype=wp.vec2i, device=device)
         self.prev_pair_point_count = wp.zeros(m, dtype=wp.int32, device=device)

@@ -208,7 +208,7 @@ class Simulator:
         c = self.contacts
         arrays = [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                   c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                  c.terrain_contact_surface, c.terrain_contact_approach, self.solver.sim_step]
+                  c.terrain_contact_surface, self.solver.sim_step]
         if self.pairs is not None:
             arrays += [c.prev_pair_count, c.prev_pair_body, c.prev_pair_point_count, c.prev_pair_feature,
                        c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]

@@ -8,6 +8,7 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 import warp as wp
 
 from .coloring import COLOR_COUNT
+from .soft_step import restitution_impulse, restitution_stop
 
 wp.set_module_options({"enable_backward": False})
 
@@ -16,7 +17,8 @@ POINTS = 4
 MODE_WARM_START = 0
 MODE_SOLVE = 1
 MODE_RELAX = 2
-MODE_RESTITUTION = 3
+MODE_RESTITUTION_STOP = 3
+MODE_RESTITUTION_BOUNCE = 4
 
 
 @wp.struct
@@ -70,7 +72,6 @@ def solve_one_pair(
     pair_depth: wp.array(dtype=float),
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    pair_approach: wp.array(dtype=float),
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_shift_v: wp.array(dtype=wp.vec3),
     solver_shift_w: wp.array(dtype=wp.vec3),
@@ -103,16 +104,18 @@ def solve_one_pair(
         acc = pair_normal_impulse[slot]
         k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
         if mode == MODE_WARM_START:
-            pair_approach[slot] = wp.dot(relative_velocity(vel, ri, rj), n)
             vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
                                      inv_ij)
-        elif mode == MODE_RESTITUTION:
-            approach = pair_approach[slot]
-            if e > 0.0 and approach < -restitution_threshold and acc > 0.0:
-                vn = wp.dot(relative_velocity(vel, ri, rj), n)
-                new_acc = wp.max(acc - (vn + e * approach) / k_n, 0.0)
-                pair_normal_impulse[slot] = new_acc
-                vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+        elif mode == MODE_RESTITUTION_STOP or mode == MODE_RESTITUTION_BOUNCE:
+            extra = float(0.0)
+            if e > 0.0:
+                if mode == MODE_RESTITUTION_STOP:
+                    extra = restitution_stop(acc, wp.dot(relative_velocity(vel, ri, rj), n), k_n)
+                else:
+                    extra = restitution_impulse(acc, k_n, e, restitution_threshold)
+            if extra > 0.0:
+                pair_normal_impulse[slot] = acc + extra
+                vel = apply_pair_impulse(vel, extra * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
         else:
             separation = -pair_depth[slot]
             if mode == MODE_RELAX:
@@ -187,7 +190,6 @@ def pair_pass(
     pair_depth: wp.array(dtype=float),
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    pair_approach: wp.array(dtype=float),
     # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_shift_v: wp.array(dtype=wp.vec3),
@@ -210,4 +212,4 @@ def pair_pass(
         solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution, h, soft,
                        max_push_velocity, restitution_threshold, body_pos, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
-                       pair_approach, solver_inv_inertia, solver_shift_v, solver_shift_w, solver_v, solver_w)
+                       solver_inv_inertia, solver_shift_v, solver_shift_w, solver_v, solver_w)

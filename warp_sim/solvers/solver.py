@@ -14,7 +14,8 @@ import warp as wp
 from ..launch import launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
-from .pair_solve import MODE_RELAX, MODE_RESTITUTION, MODE_SOLVE, MODE_WARM_START, pair_pass
+from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
+                         MODE_WARM_START, pair_pass)
 from .soft_step import soft_coefficients, solve_and_integrate
 from .staged import finalize_bodies, integrate_positions, prepare_bodies, terrain_restitution, terrain_sweep
 
@@ -81,7 +82,7 @@ class SoftStepSolver:
                 # Contacts
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
-                contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_approach,
+                contacts.terrain_contact_tangent_impulse,
                 # State in
                 *state_in.fields(),
                 # State out
@@ -105,7 +106,7 @@ class SoftStepSolver:
             self.gravity, dt, integrator,
             state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse, c.terrain_contact_approach,
+            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0], device=dev)
 
         def terrain(use_bias: int):
@@ -130,7 +131,7 @@ class SoftStepSolver:
                     dt, soft, s.max_push_velocity, s.restitution_threshold,
                     state_in.body_pos,
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
-                    c.pair_normal_impulse, c.pair_tangent_impulse, c.pair_approach,
+                    c.pair_normal_impulse, c.pair_tangent_impulse,
                     self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v,
                     self.solver_w], device=dev)
 
@@ -146,13 +147,14 @@ class SoftStepSolver:
         for _ in range(s.relax_iterations):
             terrain(0)
             pairs(MODE_RELAX)
-        launch(terrain_restitution, n, key=self, inputs=[
-            m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
-            s.restitution_threshold, state_in.body_pos,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-            c.terrain_contact_normal_impulse, c.terrain_contact_approach,
-            self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
-        pairs(MODE_RESTITUTION)
+        for phase, mode in ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)):
+            launch(terrain_restitution, n, key=self, inputs=[
+                m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
+                s.restitution_threshold, phase, state_in.body_pos,
+                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+                c.terrain_contact_normal_impulse,
+                self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
+            pairs(mode)
         launch(finalize_bodies, n, key=self, inputs=[
             m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
             state_in.body_rot, state_in.body_vel, state_in.body_angmom,

@@ -8,7 +8,9 @@ stages one thread per pair of one colour (pairs of a colour share no dynamic bod
     -> iterations x [terrain sweep (body), pair sweep (each colour)]       with soft bias
     -> integrate positions (body)
     -> relax_iterations x [terrain sweep (body), pair sweep (each colour)] no bias
-    -> restitution (body, then pairs by colour) -> finalize (body)
+    -> restitution: stop pass, then bounce pass, each (body, then pairs by colour); Poisson,
+       see soft_step.restitution_impulse
+    -> finalize (body)
 
 Pair contact algebra, for a point with arms r_i = p - x_i, r_j = p - x_j and normal n (j -> i):
 
@@ -24,7 +26,7 @@ import warp as wp
 
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
-from .soft_step import BodyVelocity, apply_impulse, sweep
+from .soft_step import BodyVelocity, apply_impulse, restitution_impulse, restitution_stop, sweep
 
 wp.set_module_options({"enable_backward": False})
 
@@ -64,7 +66,6 @@ def prepare_bodies(
     terrain_contact_normal: wp.array(dtype=wp.vec3),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
-    terrain_contact_approach: wp.array(dtype=float),
     # Out
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
@@ -92,7 +93,6 @@ def prepare_bodies(
         if terrain_contact_active[slot] != 0:
             n = terrain_contact_normal[slot]
             arm = terrain_contact_point[slot] - x
-            terrain_contact_approach[slot] = wp.dot(vel.v + wp.cross(vel.w, arm), n)
             warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
             vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
     solver_v[i] = vel.v
@@ -214,6 +214,7 @@ def terrain_restitution(
     body_checkpoint_start: wp.array(dtype=wp.int32),
     body_checkpoint_count: wp.array(dtype=wp.int32),
     restitution_threshold: float,
+    phase: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
@@ -221,7 +222,6 @@ def terrain_restitution(
     terrain_contact_point: wp.array(dtype=wp.vec3),
     terrain_contact_normal: wp.array(dtype=wp.vec3),
     terrain_contact_normal_impulse: wp.array(dtype=float),
-    terrain_contact_approach: wp.array(dtype=float),
     # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
@@ -239,17 +239,19 @@ def terrain_restitution(
     vel.w = solver_w[i]
     start = body_checkpoint_start[i]
     for slot in range(start, start + body_checkpoint_count[i]):
-        approach = terrain_contact_approach[slot]
         acc = terrain_contact_normal_impulse[slot]
-        if terrain_contact_active[slot] != 0 and approach < -restitution_threshold and acc > 0.0:
+        if terrain_contact_active[slot] != 0 and acc > 0.0:
             n = terrain_contact_normal[slot]
             arm = terrain_contact_point[slot] - x
-            vn = wp.dot(vel.v + wp.cross(vel.w, arm), n)
             rn = wp.cross(arm, n)
             k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
-            new_acc = wp.max(acc - (vn + e * approach) / k_n, 0.0)
-            terrain_contact_normal_impulse[slot] = new_acc
-            vel = apply_impulse(vel, (new_acc - acc) * n, arm, inv_mass, inv_inertia)
+            extra = float(0.0)
+            if phase == 0:
+                extra = restitution_stop(acc, wp.dot(vel.v + wp.cross(vel.w, arm), n), k_n)
+            else:
+                extra = restitution_impulse(acc, k_n, e, restitution_threshold)
+            terrain_contact_normal_impulse[slot] = acc + extra
+            vel = apply_impulse(vel, extra * n, arm, inv_mass, inv_inertia)
     solver_v[i] = vel.v
     solver_w[i] = vel.w
 
