@@ -1,0 +1,132 @@
+"""Body-body contact: stacking, pyramids, piles, impacts, rain on the terrain, determinism."""
+
+import hashlib
+import math
+
+import numpy as np
+import pytest
+
+from warp_sim import FourierTerrain, ModelBuilder, PlaneTerrain, SimConfig, Simulator, cases
+from warp_sim.builder import Material
+
+G = cases.GRAVITY
+
+
+def omega(h: float) -> float:
+    """Soft contact angular frequency 2 pi min(30 Hz, 1 / (4 h))."""
+    return 2.0 * math.pi * min(30.0, 0.25 / h)
+
+
+def stack(count: int, **config) -> Simulator:
+    b = ModelBuilder(Material(friction=0.6))
+    b.set_terrain(PlaneTerrain())
+    for k in range(count):
+        b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
+    return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, **config))
+
+
+def test_stack_of_ten_unit_boxes_stands_for_ten_seconds():
+    """The soft contact is a spring: a point of effective mass m_eff = 1/k_n under load W sags
+    W / (m_eff omega^2).  Unit cubes: a face has 4 points, k_n = 4 against the ground and 8
+    between two boxes, so the column sags 10 g/w^2 + sum_k 2 (10 - k) g/w^2 = 100 g / omega^2
+    (2.8 cm at 30 Hz) in its first second.  That is compliance, not drift: from then on the top
+    box must move less than 1 cm over the remaining 9 s."""
+    sim = stack(10)
+    top0 = sim.state.body_pos.numpy()[-1].copy()
+    sim.step(60)
+    settled = sim.state.body_pos.numpy()[-1].copy()
+    assert top0[1] - settled[1] == pytest.approx(100 * G / omega(sim.substep_dt) ** 2, rel=0.05)
+    sim.step(540)
+    assert np.linalg.norm(sim.state.body_pos.numpy()[-1] - settled) < 0.01
+
+
+def test_pyramid_of_base_ten_stands():
+    """55 boxes in a 2-D pyramid: after settling (1 s) no box moves more than 1 cm in 4 s."""
+    b = ModelBuilder(Material(friction=0.6))
+    b.set_terrain(PlaneTerrain())
+    for row in range(10):
+        for k in range(10 - row):
+            b.add_box((0.5, 0.5, 0.5), 1.0, position=(k - (9 - row) / 2.0, 0.5 + row, 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4))
+    sim.step(60)
+    settled = sim.state.body_pos.numpy().copy()
+    sim.step(240)
+    assert np.abs(sim.state.body_pos.numpy() - settled).max() < 0.01
+
+
+def test_row_of_spheres_settles_in_a_pit():
+    """Eight balls dropped into a pit of four static walls come to rest: KE/m below one gravity
+    kick per substep, (g h)^2 / 2, after 4 s (rolling resistance 0.2 as real balls have)."""
+    b = ModelBuilder(Material(friction=0.5, rolling_resistance=0.2, restitution=0.2))
+    b.set_terrain(PlaneTerrain())
+    for x, z, hx, hz in ((-2.6, 0, 0.1, 1.0), (2.6, 0, 0.1, 1.0), (0, -1.1, 2.7, 0.1), (0, 1.1, 2.7, 0.1)):
+        b.add_box((hx, 0.5, hz), 1.0, position=(x, 0.5, z), static=True)
+    for k in range(8):
+        b.add_sphere(0.25, 1.0, position=(-2.0 + 0.6 * k, 1.5 + 0.3 * k, 0.2 * (-1) ** k))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4))
+    sim.step(240)
+    dynamic = sim.model.host["body_inv_mass"] > 0
+    ke = sim.kinetic_energy(per_body=True)[dynamic] / sim.model.body_mass[dynamic]
+    assert ke.max() < 0.5 * (G * sim.substep_dt) ** 2
+    pos = sim.state.body_pos.numpy()[dynamic]
+    assert np.all(np.abs(pos[:, 0]) < 2.5) and np.all(np.abs(pos[:, 2]) < 1.0)  # all still inside
+
+
+def test_cradle_conserves_momentum_and_adds_no_energy():
+    """Five touching balls, e = 1, no friction, no gravity; the first hits at 2 m/s.  Impulses
+    are equal and opposite, so momentum is exact to float32 round-off; Poisson restitution on
+    every contact of the chain at once can lose energy (the balls stay in contact over
+    substeps) but must never create it."""
+    b = ModelBuilder(Material(restitution=1.0, friction=0.0))
+    for k in range(5):
+        b.add_sphere(0.5, 1.0, position=(k * 1.0, 0.0, 0.0), velocity=(2.0 if k == 0 else 0.0, 0.0, 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, gravity=(0, 0, 0), restitution_threshold=0.0))
+    for _ in range(60):
+        sim.step()
+        v = sim.state.body_vel.numpy().astype(np.float64)
+        assert np.abs(v.sum(axis=0) - [2.0, 0.0, 0.0]).max() < 1e-5
+        assert sim.kinetic_energy() <= 2.0 * (1 + 1e-5)
+
+
+def test_two_spheres_with_e_one_exchange_velocities():
+    """Equal masses, head-on, e = 1: the velocities swap (3, -1) -> (-1, 3)."""
+    b = ModelBuilder(Material(restitution=1.0, friction=0.0))
+    b.add_sphere(0.5, 1.0, position=(-2.0, 0.0, 0.0), velocity=(3.0, 0.0, 0.0))
+    b.add_sphere(0.5, 1.0, position=(2.0, 0.0, 0.0), velocity=(-1.0, 0.0, 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, gravity=(0, 0, 0)))
+    sim.step(120)
+    np.testing.assert_allclose(sim.state.body_vel.numpy()[:, 0], [-1.0, 3.0], atol=1e-4)
+
+
+def test_rain_on_terrain_settles_without_sinking_or_rising():
+    """200 mixed bodies dropped 0.5 m onto the Fourier terrain, colliding with each other.
+    No body ever rises above its drop height (contacts only push apart what they caught: any
+    rise is energy from nowhere).  Depth bound: a body at the bottom of a pile of up to three
+    carries 3 m g; at the box corner's m_eff >= m/4 that sags 12 g / omega^2, plus g h / omega
+    for the touchdown speed left after the speculative stop (see test_contacts)."""
+    sim = cases.terrain_drop(200, "mix", terrain=FourierTerrain(amplitude=0.3), spacing=0.9,
+                             rolling_resistance=0.2, body_contact=True)
+    h = sim.substep_dt
+    y0 = sim.state.body_pos.numpy()[:, 1].copy()
+    deepest, rise = 0.0, 0.0
+    for i in range(240):
+        sim.step()
+        rise = max(rise, float((sim.state.body_pos.numpy()[:, 1] - y0).max()))
+        if i % 10 == 0:
+            deepest = max(deepest, sim.max_penetration())
+    assert rise <= 0.0
+    assert deepest < 12 * G / omega(h) ** 2 + G * h / omega(h)
+    assert sim.kinetic_energy() < 0.01 * 200 * G * 0.5  # under 1% of the drop's potential energy
+
+
+def test_contact_solver_is_deterministic():
+    """Pairs are sorted by (i, j) and coloured by one sequential walk, so a rerun is bit-identical."""
+    digests = []
+    for _ in range(2):
+        sim = cases.terrain_drop(60, "mix", terrain=FourierTerrain(amplitude=0.3), spacing=0.9, body_contact=True)
+        sim.step(90)
+        h = hashlib.sha256()
+        for a in sim.state.fields():
+            h.update(a.numpy().tobytes())
+        digests.append(h.hexdigest())
+    assert digests[0] == digests[1]
