@@ -32,7 +32,7 @@ import numpy as np
 
 from .builder import Material, ModelBuilder
 from .collide.broad_phase import BROAD_PHASES
-from .simulator import SimConfig, Simulator
+from .simulator import SOLVERS, SimConfig, Simulator
 from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 from .types import FRICTION_MODELS, INTEGRATORS, ROTATIONS, SHAPES
 
@@ -343,6 +343,7 @@ SIM_SCHEMA = {
     "restitution_threshold": Number(ge=0),
     "convergence_tolerance": Number(ge=0),
     "speculative_margin": Number(ge=0),
+    "solver": Choice(SOLVERS),
     "body_contact": Boolean(),
     "broad_phase": Choice(tuple(BROAD_PHASES)),
     "contact_max": Integer(ge=0),

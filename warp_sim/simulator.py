@@ -29,6 +29,9 @@ from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX
 
 
+SOLVERS = ("soft_step", "pushout")
+
+
 class NonFiniteStateError(RuntimeError):
     def __init__(self, body: int, step: int, time: float, shape: str):
         super().__init__(f"body {body} ({shape}) became non-finite at step {step} (t = {time:.6g} s)")
@@ -55,6 +58,7 @@ class SimConfig:
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
+    solver: str = "soft_step"
     speculative_margin: float = 0.02
     body_contact: bool = True
     broad_phase: str = "grid"
@@ -71,6 +75,7 @@ class SimConfig:
             max_push_velocity=self.max_push_velocity,
             restitution_threshold=self.restitution_threshold,
             convergence_tolerance=self.convergence_tolerance,
+            solver=self.solver,
         )
 
 
@@ -81,6 +86,8 @@ def advance_step_counter(sim_step: wp.array(dtype=wp.int32)):
 
 class Simulator:
     def __init__(self, model: Model, config: SimConfig):
+        if config.solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {config.solver!r}")
         if config.broad_phase not in BROAD_PHASES:
             raise ValueError(f"broad_phase must be one of {', '.join(BROAD_PHASES)}, got {config.broad_phase!r}")
         self.model = model

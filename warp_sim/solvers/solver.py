@@ -14,6 +14,7 @@ import warp as wp
 from ..launch import launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
+from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
                          MODE_WARM_START, pair_pass)
 from .soft_step import soft_coefficients, solve_and_integrate
@@ -33,6 +34,7 @@ class SolverSettings:
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
+    solver: str = "soft_step"
 
 
 class SoftStepSolver:
@@ -59,7 +61,10 @@ class SoftStepSolver:
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None):
         """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path."""
-        if color_sizes is None:
+        if self.settings.solver == "pushout":
+            self._step_pushout(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
+                               color_sizes or [])
+        elif color_sizes is None:
             self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
         else:
             self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes)
@@ -162,3 +167,51 @@ class SoftStepSolver:
             state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
             body_bad_step, bad_count], device=dev)
 
+
+    def _step_pushout(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes):
+        """The thesis's response (pushout.py): one impulse pass, integrate, then position push-out."""
+        s = self.settings
+        m, c = model, contacts
+        n = m.body_count
+        integrator = INTEGRATORS[s.integrator]
+        dev = self.device
+        launch(prepare_bodies, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
+            self.gravity, dt, integrator,
+            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0], device=dev)
+
+        def pairs(position_pass: int):
+            for color, size in enumerate(color_sizes):
+                if size:
+                    launch(pushout_pair, 1 if color == COLOR_COUNT else size, key=self, inputs=[
+                        position_pass, color, c.color_start, c.color_pairs_sorted,
+                        m.body_inv_mass, m.body_restitution, m.body_friction, state_in.body_pos,
+                        c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
+                        self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v,
+                        self.solver_w, state_out.body_pos], device=dev)
+
+        launch(pushout_terrain_impulse, n, key=self, inputs=[
+            m.body_inv_mass, m.body_restitution, m.body_friction, m.body_checkpoint_start, m.body_checkpoint_count,
+            state_in.body_pos, c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_depth, self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
+        pairs(0)
+        launch(integrate_positions, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator, ROTATIONS[s.rotation],
+            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
+            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=dev)
+        for _ in range(s.iterations):
+            launch(pushout_terrain_position, n, key=self, inputs=[
+                m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state_in.body_pos,
+                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
+                self.solver_shift_v, self.solver_shift_w, state_out.body_pos], device=dev)
+            pairs(1)
+        launch(finalize_bodies, n, key=self, inputs=[
+            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
+            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0,
+            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
+            body_bad_step, bad_count], device=dev)
