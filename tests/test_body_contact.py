@@ -22,6 +22,7 @@ def stack(count: int, **config) -> Simulator:
     b.set_terrain(PlaneTerrain())
     for k in range(count):
         b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
+    config.setdefault("sleep", False)  # measure the solver, not sleeping
     return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, **config))
 
 
@@ -47,7 +48,7 @@ def test_pyramid_of_base_ten_stands():
     for row in range(10):
         for k in range(10 - row):
             b.add_box((0.5, 0.5, 0.5), 1.0, position=(k - (9 - row) / 2.0, 0.5 + row, 0.0))
-    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False))
     sim.step(60)
     settled = sim.state.body_pos.numpy().copy()
     sim.step(240)
@@ -63,7 +64,7 @@ def test_row_of_spheres_settles_in_a_pit():
         b.add_box((hx, 0.5, hz), 1.0, position=(x, 0.5, z), static=True)
     for k in range(8):
         b.add_sphere(0.25, 1.0, position=(-2.0 + 0.6 * k, 1.5 + 0.3 * k, 0.2 * (-1) ** k))
-    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False))
     sim.step(240)
     dynamic = sim.model.host["body_inv_mass"] > 0
     ke = sim.kinetic_energy(per_body=True)[dynamic] / sim.model.body_mass[dynamic]
@@ -151,3 +152,32 @@ def test_pushout_baseline_vibrates_where_the_solver_rests(solver):
         assert rms < 0.1 * gh
     else:
         assert rms > gh
+
+
+def test_sleeping_stack_falls_asleep_and_a_falling_ball_wakes_it():
+    """Four stacked boxes settle and sleep (timer 0.5 s once every point moves under 5 cm/s and
+    so do all their neighbours).  A ball dropped from 30 m lands at t = sqrt(2 * 26 / g) ~ 2.3 s;
+    touching the sleeping top box wakes it, and the wake spreads down one contact per step, so
+    within 4 steps the whole stack is awake; after the ball comes to rest all sleep again."""
+    b = ModelBuilder(Material(friction=0.6))
+    b.set_terrain(PlaneTerrain())
+    for k in range(4):
+        b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
+    b.add_sphere(0.25, 1.0, position=(0.1, 30.0, 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4))
+    sim.step(120)  # 2 s: the stack has been still for well over 0.5 s; the ball is still falling
+    asleep = sim.sleep.body_inv_mass_awake.numpy()[:4] == 0.0
+    assert asleep.all()
+    frozen = sim.state.body_pos.numpy()[:4].copy()
+    sim.step(10)
+    np.testing.assert_array_equal(sim.state.body_pos.numpy()[:4], frozen)
+    woke = False
+    for _ in range(60):
+        sim.step()
+        if sim.awake_count() == 5:
+            woke = True
+            break
+    assert woke
+    sim.step(300)
+    assert sim.awake_count() == 0
+    assert sim.kinetic_energy() == 0.0

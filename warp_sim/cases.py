@@ -18,6 +18,8 @@ GRAVITY = 9.81
 
 
 def _sim(builder: ModelBuilder, device="cpu", **config) -> Simulator:
+    # sleeping off: these cases measure the solver itself, not how soon it may stop
+    config.setdefault("sleep", False)
     cfg = SimConfig(device=device, **config)
     return Simulator(builder.finalize(device), cfg)
 

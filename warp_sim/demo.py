@@ -55,6 +55,9 @@ def main(argv=None) -> int:
         print("error: --frames must be >= 1", file=sys.stderr)
         return 2
 
+    from warp_sim.cli import quiet_warp
+
+    quiet_warp()
     from render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
 
     scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)

@@ -5,6 +5,8 @@ One step of ``dt`` is ``substeps`` substeps of h = dt / substeps, each:
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
 
+then, with sleeping on, the sleep timers are updated (sleep.py).
+
 The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
 has body-body contact (``body_contact``), so a scene pays for what it uses.  On CUDA a step
 without body-body contact is captured once as a graph and replayed; with it, the colour sizes
@@ -22,6 +24,7 @@ import warp as wp
 from .collide import collide_terrain
 from .collide.broad_phase import BROAD_PHASES
 from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
+from .sleep import AwakeModel, Sleep
 from .launch import launch
 from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
@@ -59,6 +62,9 @@ class SimConfig:
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     solver: str = "soft_step"
+    sleep: bool = True
+    sleep_velocity: float = 0.05
+    sleep_time: float = 0.5
     speculative_margin: float = 0.02
     body_contact: bool = True
     broad_phase: str = "grid"
@@ -96,11 +102,18 @@ class Simulator:
         self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
         dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
+        # with sleeping on, every kernel sees sleeping bodies as static (sleep.py)
+        self.sleep = None
+        self.physics_model = model
+        if config.sleep and dynamic >= 1:
+            self.sleep = Sleep(model, config.sleep_velocity, config.sleep_time, self.device)
+            self.physics_model = AwakeModel(model, self.sleep.body_inv_mass_awake)
         self.pairs = None
+        self._color_sizes = None
         capacity = 0
         if config.body_contact and model.body_count >= 2 and dynamic >= 1:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
-            self.pairs = PairContactPipeline(model, config.broad_phase, capacity, self.device)
+            self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device)
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -121,7 +134,7 @@ class Simulator:
         return self.config.dt / self.config.substeps
 
     def collide(self, state, contacts, h: float, speculative_margin: float):
-        m = self.model
+        m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
         launch(
@@ -152,8 +165,9 @@ class Simulator:
             color_sizes = None
             if self.pairs is not None:
                 color_sizes = self.pairs.collide(self.states[0], self.contacts, self.config.speculative_margin)
-            self.solver.step(self.model, self.states[0], self.states[1], self.contacts, h, self.body_bad_step,
-                             self.bad_count, color_sizes)
+                self._color_sizes = color_sizes
+            self.solver.step(self.physics_model, self.states[0], self.states[1], self.contacts, h,
+                             self.body_bad_step, self.bad_count, color_sizes)
             if self.pairs is not None:
                 self.pairs.store(self.contacts)
             self.states[0], self.states[1] = self.states[1], self.states[0]
@@ -161,6 +175,8 @@ class Simulator:
             # Keep the captured graph's output in the buffer it started from.
             self.states[1].assign(self.states[0])
             self.states[0], self.states[1] = self.states[1], self.states[0]
+        if self.sleep is not None:
+            self.sleep.update(self.states[0], self.config.dt, self.contacts, self._color_sizes)
         wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
 
     def step(self, count: int = 1, check: bool = True):
@@ -199,6 +215,8 @@ class Simulator:
         self.body_bad_step.fill_(-1)
         self.bad_count.zero_()
         self.solver.sim_step.zero_()
+        if self.sleep is not None:
+            self.sleep.wake_all()
         self.step_count = 0
         self.graph = None
 
@@ -216,6 +234,8 @@ class Simulator:
         arrays = [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                   c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
                   c.terrain_contact_surface, self.solver.sim_step]
+        if self.sleep is not None:
+            arrays += [self.sleep.body_sleep_timer, self.sleep.body_inv_mass_awake]
         if self.pairs is not None:
             arrays += [c.prev_pair_count, c.prev_pair_body, c.prev_pair_point_count, c.prev_pair_feature,
                        c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]
@@ -229,7 +249,18 @@ class Simulator:
     def set_terrain(self, terrain):
         """Replace the terrain the bodies collide with (GUI edits); takes effect next step."""
         self.model.set_terrain(terrain)
+        self.wake_all()
         self.invalidate_graph()
+
+    def wake_all(self):
+        if self.sleep is not None:
+            self.sleep.wake_all()
+
+    def awake_count(self) -> int:
+        """Dynamic bodies not asleep."""
+        if self.sleep is None:
+            return int(np.count_nonzero(self.model.host["body_inv_mass"] > 0))
+        return self.sleep.awake_count()
 
     def update_settings(self, **changes):
         """Change SimConfig fields (dt, substeps, gravity, integrator, ...) between steps.
@@ -243,6 +274,7 @@ class Simulator:
         self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device,
                                      self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
+        self.wake_all()
         self.invalidate_graph()
 
     # Measurements -----------------------------------------------------------------------------
