@@ -159,11 +159,12 @@ DEFAULT_TERRAIN = FourierTerrain()
 def terrain_drop(count: int, shape="sphere", terrain: FourierTerrain | None = None, spacing=1.2, clearance=0.5,
                  radius=0.25, half_extents=(0.25, 0.25, 0.25), rolling_resistance=0.1, friction=0.6,
                  restitution=0.0, dt=1.0 / 60.0, substeps=4, seed=0, body_contact=False,
-                 device="cpu") -> Simulator:
+                 device="cpu", **config) -> Simulator:
     """``count`` bodies on a square grid above the Fourier terrain; ``shape`` sphere, box or mix.
 
     This is the benchmark scene too: the same bodies, the same terrain, the same drop heights.
-    ``body_contact`` adds body-body collision (off: terrain contact only, the fused fast path).
+    ``body_contact`` adds body-body collision (off: terrain contact only, the fused fast path);
+    other keyword arguments are SimConfig fields (broad_phase, solver, sleep, ...).
     """
     from .builder import random_quaternions
 
@@ -186,4 +187,4 @@ def terrain_drop(count: int, shape="sphere", terrain: FourierTerrain | None = No
             b.add_sphere(radius, 1.0, position=pos)
         else:
             b.add_box(half_extents, 1.0, position=pos, orientation=tuple(quats[i]))
-    return _sim(b, device, dt=dt, substeps=substeps, seed=seed, body_contact=body_contact)
+    return _sim(b, device, dt=dt, substeps=substeps, seed=seed, body_contact=body_contact, **config)

@@ -16,6 +16,7 @@ are read back each substep, so the launches are issued directly.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,6 +121,8 @@ class Simulator:
         self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.step_count = 0
         self.graph = None
+        self.profile = False  # when set, step() records per-stage wall time in stage_times [s]
+        self.stage_times: dict[str, float] = {}
 
     @property
     def state(self):
@@ -158,31 +161,43 @@ class Simulator:
             device=self.device,
         )
 
+    def _stage(self, name: str, fn, *args):
+        """Run one stage; with ``profile`` set, synchronise and add its wall time to stage_times."""
+        if not self.profile:
+            return fn(*args)
+        wp.synchronize_device(self.device)
+        start = time.perf_counter()
+        out = fn(*args)
+        wp.synchronize_device(self.device)
+        self.stage_times[name] = self.stage_times.get(name, 0.0) + time.perf_counter() - start
+        return out
+
     def _simulate_one_step(self):
         h = self.substep_dt
         for _ in range(self.config.substeps):
-            self.collide(self.states[0], self.contacts, h, self.config.speculative_margin)
+            self._stage("terrain", self.collide, self.states[0], self.contacts, h, self.config.speculative_margin)
             color_sizes = None
             if self.pairs is not None:
-                color_sizes = self.pairs.collide(self.states[0], self.contacts, self.config.speculative_margin)
+                color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts,
+                                          self.config.speculative_margin)
                 self._color_sizes = color_sizes
-            self.solver.step(self.physics_model, self.states[0], self.states[1], self.contacts, h,
-                             self.body_bad_step, self.bad_count, color_sizes)
+            self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
+                        h, self.body_bad_step, self.bad_count, color_sizes)
             if self.pairs is not None:
-                self.pairs.store(self.contacts)
+                self._stage("solve", self.pairs.store, self.contacts)
             self.states[0], self.states[1] = self.states[1], self.states[0]
         if self.config.substeps % 2 == 1:
             # Keep the captured graph's output in the buffer it started from.
             self.states[1].assign(self.states[0])
             self.states[0], self.states[1] = self.states[1], self.states[0]
         if self.sleep is not None:
-            self.sleep.update(self.states[0], self.config.dt, self.contacts, self._color_sizes)
+            self._stage("sleep", self.sleep.update, self.states[0], self.config.dt, self.contacts, self._color_sizes)
         wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
 
     def step(self, count: int = 1, check: bool = True):
         """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""
         for _ in range(count):
-            if self.device.is_cuda and self.pairs is None:
+            if self.device.is_cuda and self.pairs is None and not self.profile:
                 if self.graph is None:
                     with wp.ScopedCapture(device=self.device) as capture:
                         self._simulate_one_step()

@@ -152,7 +152,9 @@ class SoftStepSolver:
         for _ in range(s.relax_iterations):
             terrain(0)
             pairs(MODE_RELAX)
-        for phase, mode in ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)):
+        # a scene without restitution pays for no restitution passes
+        phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
+        for phase, mode in phases:
             launch(terrain_restitution, n, key=self, inputs=[
                 m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
                 s.restitution_threshold, phase, state_in.body_pos,

@@ -1,0 +1,107 @@
+"""Rain of N mixed spheres and boxes on the Fourier terrain, with body-body contact, per broad phase.
+
+    python bench/rain.py                                   # N = 1k, 10k, 100k; every broad phase
+    python bench/rain.py --counts 10000 --broad-phases grid --sleep
+
+The scene is ``warp_sim.cases.terrain_drop(N, "mix", body_contact=True)`` at dt = 1/60 with 4
+substeps (Box2D's benchmark rate); bodies are simulated ``--settle`` seconds so they are piled
+and in contact, then ``--steps`` steps are timed.  Sleeping is off unless ``--sleep`` (a
+benchmark of the solver, not of how soon it may stop).  The O(N^2) broad phases are skipped
+where their pair buffer (all_pairs: N^2/2 pairs) or their per-call time (bounding_sphere) makes
+a run unusable; the row says so.  A run that fails the invalid-state gate is marked failed.
+Writes bench/results/rain_<device>.{csv,json,png}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import warp as wp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from bench.common import RESULTS, machine_info, state_gate, write_rows  # noqa: E402
+from warp_sim import cases  # noqa: E402
+
+# Beyond these the method is not usable: all_pairs needs N(N-1)/2 pair slots (10k bodies: 50M
+# pairs, 400 MB of pair indices alone) and bounding_sphere's O(N^2) test costs ~0.1 s per call
+# at 10k bodies (bench/broad_phase.py), i.e. seconds per step with 4 substeps.
+LIMITS = {"all_pairs": 3000, "bounding_sphere": 10000}
+
+
+def measure(count: int, broad_phase: str, settle: float, steps: int, device: str, sleep: bool) -> dict:
+    row = {"bodies": count, "broad_phase": broad_phase, "dt": 1 / 60, "substeps": 4, "sleep": sleep}
+    if count > LIMITS.get(broad_phase, count):
+        return {**row, "steps": 0, "wall_s": "", "steps_per_s": "", "body_steps_per_s": "", "contacts": "",
+                "awake": "", "max_penetration_m": "", "status": f"skipped: O(N^2) beyond {LIMITS[broad_phase]}"}
+    capacity = count * (count - 1) // 2 + 64 if broad_phase == "all_pairs" else 0
+    sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase=broad_phase, device=device,
+                             spacing=0.9, sleep=sleep, contact_max=capacity, rolling_resistance=0.2)
+    sim.step(1)
+    sim.step(int(round(settle * 60)), check=False)
+    wp.synchronize_device(device)
+    start = time.perf_counter()
+    sim.step(steps, check=False)
+    wp.synchronize_device(device)
+    wall = time.perf_counter() - start
+    sim.check_finite()
+    failure = state_gate(sim)
+    return {**row, "steps": steps, "wall_s": round(wall, 4), "steps_per_s": round(steps / wall, 2),
+            "body_steps_per_s": round(count * steps / wall), "contacts": sim.contact_count(),
+            "awake": sim.awake_count(), "max_penetration_m": round(sim.max_penetration(), 6),
+            "status": failure or "ok"}
+
+
+def chart(rows: list[dict], path: Path, title: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for bp in dict.fromkeys(r["broad_phase"] for r in rows):
+        pts = [(r["bodies"], r["steps_per_s"]) for r in rows if r["broad_phase"] == bp and r["status"] == "ok"]
+        if pts:
+            ax.loglog(*zip(*pts), marker="o", label=bp)
+    ax.axhline(30, color="grey", ls="--", lw=0.8, label="30 steps/s")
+    ax.set_xlabel("bodies (mixed spheres and boxes)")
+    ax.set_ylabel("steps / s (dt 1/60, 4 substeps)")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--counts", type=int, nargs="+", default=[1000, 10000, 100000])
+    p.add_argument("--broad-phases", nargs="+", default=["grid", "grid_hash", "bounding_sphere", "all_pairs"])
+    p.add_argument("--settle", type=float, default=1.5, help="simulated seconds before timing")
+    p.add_argument("--steps", type=int, default=30)
+    p.add_argument("--sleep", action="store_true")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--tag", default="")
+    args = p.parse_args(argv)
+    wp.config.log_level = wp.LOG_WARNING
+    wp.init()
+    meta = machine_info(args.device)
+    from tqdm import tqdm
+
+    rows = []
+    for count, bp in tqdm([(n, b) for n in args.counts for b in args.broad_phases], desc="rain", unit="case"):
+        row = measure(count, bp, args.settle, args.steps, args.device, args.sleep)
+        rows.append(row)
+        tqdm.write(f"N={count:>7d} {bp:16s} {row['steps_per_s']!s:>9} steps/s  [{row['status']}]")
+    name = f"rain_{args.device.replace(':', '')}{args.tag}"
+    csv_path, _ = write_rows(name, rows, meta)
+    chart(rows, RESULTS / f"{name}.png", f"rain on terrain with body contact ({meta['cpu'][:32]})")
+    print(f"wrote {csv_path} (+ .json, .png)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
