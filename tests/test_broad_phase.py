@@ -5,13 +5,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_sim.collide.broad_phase import (
-    BROAD_PHASES,
-    BroadPhaseOverflowError,
-    make_broad_phase,
-    table_layout_host,
-    triangle_pair,
-)
+from warp_sim.collide.broad_phase import BROAD_PHASES, BroadPhaseOverflowError, make_broad_phase, triangle_pair
+from warp_sim.collide.broad_phase_grid import table_layout_host
 
 FILTERED = ["bounding_sphere", "grid", "grid_sorted", "grid_hash"]
 
