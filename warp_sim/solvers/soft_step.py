@@ -232,6 +232,63 @@ def restitution_impulse(accumulated: float, k_n: float, e: float, threshold: flo
 
 
 @wp.func
+def warm_start_terrain(
+    start: int,
+    count: int,
+    x: wp.vec3,
+    vel: BodyVelocity,
+    inv_mass: float,
+    inv_inertia: wp.mat33,
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+) -> BodyVelocity:
+    """Re-apply last substep's accumulated impulses of the body's active terrain slots."""
+    for slot in range(start, start + count):
+        if terrain_contact_active[slot] != 0:
+            n = terrain_contact_normal[slot]
+            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
+            vel = apply_impulse(vel, warm, terrain_contact_point[slot] - x, inv_mass, inv_inertia)
+    return vel
+
+
+@wp.func
+def restitution_pass(
+    phase: int,
+    start: int,
+    count: int,
+    x: wp.vec3,
+    vel: BodyVelocity,
+    inv_mass: float,
+    inv_inertia: wp.mat33,
+    e: float,
+    restitution_threshold: float,
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+) -> BodyVelocity:
+    """Phase 0 stops every engaged terrain contact still closing; phase 1 adds the bounces."""
+    for slot in range(start, start + count):
+        acc = terrain_contact_normal_impulse[slot]
+        if terrain_contact_active[slot] != 0 and acc > 0.0:
+            n = terrain_contact_normal[slot]
+            arm = terrain_contact_point[slot] - x
+            rn = wp.cross(arm, n)
+            k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
+            extra = float(0.0)
+            if phase == 0:
+                extra = restitution_stop(acc, wp.dot(vel.v + wp.cross(vel.w, arm), n), k_n)
+            else:
+                extra = restitution_impulse(acc, k_n, e, restitution_threshold)
+            terrain_contact_normal_impulse[slot] = acc + extra
+            vel = apply_impulse(vel, extra * n, arm, inv_mass, inv_inertia)
+    return vel
+
+
+@wp.func
 def sweep_converged(before: BodyVelocity, after: BodyVelocity, reach: float, tolerance: float) -> bool:
     """A sweep that moved no point of the body by more than ``tolerance`` [m/s] has converged:
     Gauss-Seidel changes shrink geometrically, so further sweeps would change less still."""
@@ -320,12 +377,10 @@ def solve_and_integrate(
     # Warm start
     touching = int(0)
     for slot in range(start, start + count):
-        if terrain_contact_active[slot] != 0:
-            touching = 1
-            n = terrain_contact_normal[slot]
-            arm = terrain_contact_point[slot] - x
-            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
-            vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
+        touching = touching | terrain_contact_active[slot]
+    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, terrain_contact_active,
+                             terrain_contact_point, terrain_contact_normal, terrain_contact_normal_impulse,
+                             terrain_contact_tangent_impulse)
 
     zero = wp.vec3(0.0)
     reach = body_size[i][0]
@@ -364,20 +419,9 @@ def solve_and_integrate(
         e = body_restitution[i]
         if e > 0.0:
             for phase in range(2):
-                for slot in range(start, start + count):
-                    acc = terrain_contact_normal_impulse[slot]
-                    if terrain_contact_active[slot] != 0 and acc > 0.0:
-                        n = terrain_contact_normal[slot]
-                        arm = terrain_contact_point[slot] - x
-                        rn = wp.cross(arm, n)
-                        k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
-                        extra = float(0.0)
-                        if phase == 0:
-                            extra = restitution_stop(acc, wp.dot(vel.v + wp.cross(vel.w, arm), n), k_n)
-                        else:
-                            extra = restitution_impulse(acc, k_n, e, restitution_threshold)
-                        terrain_contact_normal_impulse[slot] = acc + extra
-                        vel = apply_impulse(vel, extra * n, arm, inv_mass, inv_inertia)
+                vel = restitution_pass(phase, start, count, x, vel, inv_mass, inv_inertia, e, restitution_threshold,
+                                       terrain_contact_active, terrain_contact_point, terrain_contact_normal,
+                                       terrain_contact_normal_impulse)
         new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
 
     v_new = vel.v + ((1.0 - alpha) * h) * gravity

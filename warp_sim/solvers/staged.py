@@ -26,7 +26,7 @@ import warp as wp
 
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
-from .soft_step import BodyVelocity, apply_impulse, restitution_impulse, restitution_stop, sweep
+from .soft_step import BodyVelocity, restitution_pass, sweep, warm_start_terrain
 
 wp.set_module_options({"enable_backward": False})
 
@@ -87,14 +87,9 @@ def prepare_bodies(
     vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
     vel.w = inv_inertia * body_angmom[i]
     solver_w0[i] = vel.w
-    x = body_pos[i]
-    start = body_checkpoint_start[i]
-    for slot in range(start, start + body_checkpoint_count[i]):
-        if terrain_contact_active[slot] != 0:
-            n = terrain_contact_normal[slot]
-            arm = terrain_contact_point[slot] - x
-            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
-            vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
+    vel = warm_start_terrain(body_checkpoint_start[i], body_checkpoint_count[i], body_pos[i], vel, inv_mass,
+                             inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
+                             terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
     solver_v[i] = vel.v
     solver_w[i] = vel.w
     solver_inv_inertia[i] = inv_inertia
@@ -237,21 +232,9 @@ def terrain_restitution(
     vel = BodyVelocity()
     vel.v = solver_v[i]
     vel.w = solver_w[i]
-    start = body_checkpoint_start[i]
-    for slot in range(start, start + body_checkpoint_count[i]):
-        acc = terrain_contact_normal_impulse[slot]
-        if terrain_contact_active[slot] != 0 and acc > 0.0:
-            n = terrain_contact_normal[slot]
-            arm = terrain_contact_point[slot] - x
-            rn = wp.cross(arm, n)
-            k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
-            extra = float(0.0)
-            if phase == 0:
-                extra = restitution_stop(acc, wp.dot(vel.v + wp.cross(vel.w, arm), n), k_n)
-            else:
-                extra = restitution_impulse(acc, k_n, e, restitution_threshold)
-            terrain_contact_normal_impulse[slot] = acc + extra
-            vel = apply_impulse(vel, extra * n, arm, inv_mass, inv_inertia)
+    vel = restitution_pass(phase, body_checkpoint_start[i], body_checkpoint_count[i], x, vel, inv_mass, inv_inertia,
+                           e, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                           terrain_contact_normal, terrain_contact_normal_impulse)
     solver_v[i] = vel.v
     solver_w[i] = vel.w
 
