@@ -165,19 +165,21 @@ class FrameStats:
         self.render_ms = deque(maxlen=length)
         self.contacts = deque(maxlen=length)
         self.kinetic_energy = deque(maxlen=length)
+        self.awake = deque(maxlen=length)
         self._count = 0
 
-    def add(self, physics_ms: float, render_ms: float, contacts: int, kinetic_energy: float):
+    def add(self, physics_ms: float, render_ms: float, contacts: int, kinetic_energy: float, awake: int = 0):
         self._count += 1
         self.frame.append(self._count)
         self.physics_ms.append(physics_ms)
         self.render_ms.append(render_ms)
         self.contacts.append(contacts)
         self.kinetic_energy.append(kinetic_energy)
+        self.awake.append(awake)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {name: np.asarray(getattr(self, name), dtype=np.float64)
-                for name in ("frame", "physics_ms", "render_ms", "contacts", "kinetic_energy")}
+                for name in ("frame", "physics_ms", "render_ms", "contacts", "kinetic_energy", "awake")}
 
 
 class DemoController:
@@ -433,4 +435,4 @@ class DemoController:
         """Record this frame's numbers for the plots."""
         contacts = self.sim.contact_count()
         energy = self.sim.kinetic_energy() if with_energy else math.nan
-        self.stats.add(self.last_physics_ms, render_ms, contacts, energy)
+        self.stats.add(self.last_physics_ms, render_ms, contacts, energy, self.sim.awake_count())

@@ -276,3 +276,7 @@ class Gui:
                 implot.set_axes(implot.ImAxis_.x1, implot.ImAxis_.y2)
                 implot.plot_line("kinetic energy", x, np.nan_to_num(energy))
             implot.end_plot()
+        if implot.begin_plot("##awake", size):
+            implot.setup_axes("", "awake bodies", fit | implot.AxisFlags_.no_tick_labels, fit)
+            implot.plot_line("awake bodies", x, data["awake"])
+            implot.end_plot()
