@@ -13,8 +13,8 @@ from warp_sim.builder import Material
 G = cases.GRAVITY
 
 
-def contact_omega(h: float, hertz: float = 30.0) -> float:
-    """Angular frequency of the soft contact spring: 2 pi min(30 Hz, 1 / (4 h))."""
+def contact_omega(h: float, hertz: float = SimConfig().contact_hertz) -> float:
+    """Angular frequency of the soft contact spring: 2 pi min(contact_hertz, 1 / (4 h))."""
     return 2.0 * math.pi * min(hertz, 0.25 / h)
 
 
@@ -70,7 +70,7 @@ def test_box_slides_down_30_degree_plane_at_g_sin_minus_mu_cos():
 
 def test_box_below_friction_angle_stays_put():
     """10 deg < atan(0.3) = 16.7 deg: static friction holds.  The only allowed motion is the
-    soft contact settling along the normal (g / omega^2 ~ 0.3 mm); along the slope it must
+    soft contact settling along the normal (g / omega^2, under 0.3 mm); along the slope it must
     not creep more than that over 3 s."""
     sim = cases.sliding_box(angle_deg=10.0, friction=0.3)
     p0 = sim.state.body_pos.numpy()[0].copy()

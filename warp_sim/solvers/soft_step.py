@@ -21,7 +21,7 @@ Normal impulse with accumulation and clamping (Catto's sequential impulses):
     J_acc = max(J_acc + j, 0)                                    never pull
 
 Soft constraint (Box2D's b2MakeSoft): a contact is a spring-damper of frequency
-f = min(30 Hz, 1 / (4 h)) and damping ratio zeta = 10.  With omega = 2 pi f,
+f = min(contact_hertz, 1 / (4 h)) (default 60 Hz) and damping ratio zeta = 10.  With omega = 2 pi f,
 a1 = 2 zeta + h omega, a2 = h omega a1, a3 = 1 / (1 + a2):
 biasRate = omega / a1, massScale = a2 a3, impulseScale = a3.  A speculative contact (gap s > 0)
 instead allows v_n >= -s / h, exactly closing the gap in one substep.  Push-out speed is capped.
