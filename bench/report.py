@@ -298,7 +298,11 @@ def goal_stack(results) -> dict:
     highest = max((int(_f(r.get("height"), 0)) for r in standing), default=0)
     failures = [f"{r.get('height')}: {r.get('failure')}" for r in rows if str(r.get("failed")).lower() in ("true", "1")
                 and not str(r.get("failure", "")).startswith("not run")]
-    measured = f"highest standing stack over >= 10 s: {highest} boxes"
+    upright = [int(_f(r.get("height"), 0)) for r in rows if "standing at the end" in str(r.get("failure", ""))]
+    measured = (f"highest stack meeting the rule (top box moves < 1 cm after the first second, 10 s): "
+                f"{highest} boxes")
+    if upright:
+        measured += f"; still standing after 10 s but swaying more than 1 cm: up to {max(upright)} boxes"
     if failures:
         measured += "; first failure at height " + failures[0]
     if not any(_f(r.get("sim_time_s"), 0.0) >= 10.0 - 1e-9 for r in rows):

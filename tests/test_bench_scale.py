@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench import peers, report, scaling, sweep  # noqa: E402
+from bench import peer_engines, peers, report, scaling, sweep  # noqa: E402
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -112,8 +112,8 @@ def test_peers_writes_rows_for_installed_engines(results):
 
 
 def test_peers_skip_an_engine_that_is_not_installed(monkeypatch, tmp_path, capsys):
-    monkeypatch.setitem(peers.MODULE, "newton", "no_such_module_for_this_test")
-    assert "not installed" in peers.available("newton")
+    monkeypatch.setitem(peer_engines.MODULE, "newton", "no_such_module_for_this_test")
+    assert "not installed" in peer_engines.available("newton")
     peers.main(["--engines", "warp_sim", "newton", "--quick", "--scenes", "roll", "--out-dir", str(tmp_path),
                 "--no-chart"])
     assert "newton: skipped, not installed" in capsys.readouterr().out
@@ -128,13 +128,13 @@ def test_peers_frame_mapping_round_trips():
 
     rng = np.random.default_rng(1)
     v = rng.normal(size=(5, 3))
-    assert np.allclose(peers.from_peer(peers.to_peer(v)), v)
-    assert np.allclose(peers.to_peer(np.array([[0.0, 1.0, 0.0]])), [[0.0, 0.0, 1.0]])  # y up -> z up
+    assert np.allclose(peer_engines.from_peer(peer_engines.to_peer(v)), v)
+    assert np.allclose(peer_engines.to_peer(np.array([[0.0, 1.0, 0.0]])), [[0.0, 0.0, 1.0]])  # y up -> z up
     q = rng.normal(size=(5, 4))
-    r = peers.quat_matrices(q)
-    assert np.allclose(peers.quat_matrices(peers.matrix_quats(r)), r, atol=1e-12)
-    assert np.allclose(peers.rot_from_peer(peers.rot_to_peer(r)), r)
-    assert np.allclose(np.linalg.det(peers.rot_to_peer(r)), 1.0)
+    r = peer_engines.quat_matrices(q)
+    assert np.allclose(peer_engines.quat_matrices(peer_engines.matrix_quats(r)), r, atol=1e-12)
+    assert np.allclose(peer_engines.rot_from_peer(peer_engines.rot_to_peer(r)), r)
+    assert np.allclose(np.linalg.det(peer_engines.rot_to_peer(r)), 1.0)
 
 
 def _without_timing(rows):
