@@ -23,7 +23,7 @@ import numpy as np
 import warp as wp
 
 from .launch import launch
-from .solvers.coloring import COLOR_COUNT
+from .solvers.coloring import COLOR_COUNT, color_range
 
 wp.set_module_options({"enable_backward": False})
 
@@ -42,16 +42,8 @@ def gather_neighbour_timers(
     body_sleep_timer: wp.array(dtype=float),
     body_neighbour_timer: wp.array(dtype=float),
 ):
-    t = wp.tid() + tid_offset
-    begin = color_start[color]
-    end = color_start[color + 1]
-    first = begin + t
-    last = first + 1
-    if color == COLOR_COUNT:
-        if t != 0:
-            return
-        last = end
-    for index in range(first, wp.min(last, end)):
+    r = color_range(color, color_start, wp.tid() + tid_offset)
+    for index in range(r[0], r[1]):
         p = color_pairs_sorted[index]
         if pair_point_count[p] > 0:
             ij = pair_body[p]

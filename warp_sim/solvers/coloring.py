@@ -74,3 +74,19 @@ def color_pairs(
         ij = pair_body[p]
         body_color_mask[ij[0]] = 0
         body_color_mask[ij[1]] = 0
+
+
+@wp.func
+def color_range(color: int, color_start: wp.array(dtype=wp.int32), t: int) -> wp.vec2i:
+    """[first, last) of ``color_pairs_sorted`` that thread ``t`` of a colour's launch handles: one
+    pair per thread, except the overflow colour, whose pairs may share bodies and so are walked
+    in order by thread 0 alone."""
+    begin = color_start[color]
+    end = color_start[color + 1]
+    first = begin + t
+    last = first + 1
+    if color == COLOR_COUNT:
+        last = end
+        if t != 0:
+            first = end
+    return wp.vec2i(first, wp.min(last, end))

@@ -7,7 +7,7 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 
 import warp as wp
 
-from .coloring import COLOR_COUNT
+from .coloring import color_range
 from .soft_step import restitution_impulse, restitution_stop
 
 wp.set_module_options({"enable_backward": False})
@@ -197,18 +197,8 @@ def pair_pass(
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
-    t = wp.tid() + tid_offset
-    begin = color_start[color]
-    end = color_start[color + 1]
-    first = begin + t
-    last = first + 1
-    if color == COLOR_COUNT:
-        if t != 0:
-            return
-        last = end
-    if first >= end:
-        return
-    for index in range(first, last):
+    r = color_range(color, color_start, wp.tid() + tid_offset)
+    for index in range(r[0], r[1]):
         solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution, h, soft,
                        max_push_velocity, restitution_threshold, body_pos, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,

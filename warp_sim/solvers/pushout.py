@@ -18,7 +18,7 @@ impulses, which never accumulate, cannot hold a resting load still.
 
 import warp as wp
 
-from .coloring import COLOR_COUNT
+from .coloring import color_range
 from .pair_solve import PairVelocity, apply_pair_impulse, normal_mass_inverse, relative_velocity
 from .soft_step import BodyVelocity, apply_impulse
 
@@ -132,19 +132,6 @@ def pushout_terrain_position(
         solver_shift_v[i] = solver_shift_v[i] + deepest * normal
 
 
-@wp.func
-def pair_range(color: int, color_start: wp.array(dtype=wp.int32), t: int) -> wp.vec2i:
-    begin = color_start[color]
-    end = color_start[color + 1]
-    first = begin + t
-    last = first + 1
-    if color == COLOR_COUNT:
-        last = end
-        if t != 0:
-            first = end
-    return wp.vec2i(first, wp.min(last, end))
-
-
 @wp.kernel
 def pushout_pair(
     tid_offset: int,
@@ -173,7 +160,7 @@ def pushout_pair(
     # State out
     body_pos_out: wp.array(dtype=wp.vec3),
 ):
-    r = pair_range(color, color_start, wp.tid() + tid_offset)
+    r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
         p = color_pairs_sorted[index]
         ij = pair_body[p]
