@@ -62,12 +62,14 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def launch(kernel, dim: int, inputs: list, device, key=None) -> None:
+def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK) -> None:
+    """Launch ``kernel`` over ``dim`` items, split into chunks of at least ``min_chunk`` items
+    across the CPU cores (``min_chunk`` lower for kernels whose items are heavy)."""
     device = wp.get_device(device)
     if dim <= 0:
         return
     threads = cpu_threads() if device.is_cpu else 1
-    chunks = min(threads, dim // MIN_CHUNK)
+    chunks = min(threads, dim // max(min_chunk, 1))
     warm_key = (kernel, device.alias)
     if warm_key not in _warm:
         # the first launch compiles and loads the module: do it on this thread, whole
@@ -91,8 +93,11 @@ def launch(kernel, dim: int, inputs: list, device, key=None) -> None:
         fn, args, kwargs = jobs[0]
         fn(*args, **kwargs)
         return
+    # the calling thread runs the first chunk itself: one hand-off fewer per launch
     pool = _executor(threads)
-    futures = [pool.submit(fn, *args, **kwargs) for fn, args, kwargs in jobs]
+    futures = [pool.submit(fn, *args, **kwargs) for fn, args, kwargs in jobs[1:]]
+    fn, args, kwargs = jobs[0]
+    fn(*args, **kwargs)
     for f in futures:
         f.result()
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from .builder import Material, ModelBuilder
 from .collide.broad_phase import BROAD_PHASES
-from .simulator import SOLVERS, SimConfig, Simulator
+from .simulator import CONTACT_UPDATES, SOLVERS, SimConfig, Simulator
 from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 from .types import FRICTION_MODELS, INTEGRATORS, ROTATIONS, SHAPES
 
@@ -350,6 +350,7 @@ SIM_SCHEMA = {
     "body_contact": Boolean(),
     "broad_phase": Choice(tuple(BROAD_PHASES)),
     "contact_max": Integer(ge=0),
+    "contact_update": Choice(CONTACT_UPDATES),
 }
 
 TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")

@@ -1,11 +1,17 @@
 """Simulator: owns the model, two states, contacts and the solver; runs whole steps.
 
-One step of ``dt`` is ``substeps`` substeps of h = dt / substeps, each:
+One step of ``dt`` is ``substeps`` substeps of h = dt / substeps.  With ``contact_update =
+"substep"`` each substep is
 
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
 
-then, with sleeping on, the sleep timers are updated (sleep.py).
+With ``"step"`` (the default, Box2D v3's soft step) the collision stages run once, at the
+start of the step, with speculative margins widened to cover the whole step; the substeps then
+solve those contacts with gaps updated from the bodies' motion (solvers/staged.py).  That
+applies to scenes with body-body contact; the fused terrain-only kernel re-collides every
+substep either way (its collision pass is a few terrain evaluations per body).  Then, with
+sleeping on, the sleep timers are updated (sleep.py).
 
 The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
 has body-body contact (``body_contact``), so a scene pays for what it uses.  On CUDA a step
@@ -34,6 +40,7 @@ from .types import SHAPE_BOX
 
 
 SOLVERS = ("soft_step", "pushout")
+CONTACT_UPDATES = ("step", "substep")
 
 
 class NonFiniteStateError(RuntimeError):
@@ -55,8 +62,8 @@ class SimConfig:
     rotation: str = "quaternion"
     device: str = "cpu"
     seed: int = 0
-    iterations: int = 4
-    relax_iterations: int = 2
+    iterations: int = 2
+    relax_iterations: int = 1
     contact_hertz: float = 60.0  # capped at 1/(4 h); 30 Hz (Box2D's 2-D default) lets 3-D stacks of 20 fall
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
@@ -70,6 +77,7 @@ class SimConfig:
     body_contact: bool = True
     broad_phase: str = "grid"
     contact_max: int = 0
+    contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
 
     def solver_settings(self) -> SolverSettings:
         return SolverSettings(
@@ -95,6 +103,9 @@ class Simulator:
     def __init__(self, model: Model, config: SimConfig):
         if config.solver not in SOLVERS:
             raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {config.solver!r}")
+        if config.contact_update not in CONTACT_UPDATES:
+            raise ValueError(f"contact_update must be one of {', '.join(CONTACT_UPDATES)}, "
+                             f"got {config.contact_update!r}")
         if config.broad_phase not in BROAD_PHASES:
             raise ValueError(f"broad_phase must be one of {', '.join(BROAD_PHASES)}, got {config.broad_phase!r}")
         self.model = model
@@ -172,27 +183,55 @@ class Simulator:
         self.stage_times[name] = self.stage_times.get(name, 0.0) + time.perf_counter() - start
         return out
 
+    def _collides_once_per_step(self) -> bool:
+        return self.pairs is not None and self.config.contact_update == "step" and self.config.solver == "soft_step"
+
     def _simulate_one_step(self):
+        if self._collides_once_per_step():
+            self._simulate_one_step_collide_once()
+        else:
+            self._simulate_one_step_collide_each_substep()
+        if self.sleep is not None:
+            self._stage("sleep", self.sleep.update, self.states[0], self.config.dt, self.contacts, self._color_sizes)
+        wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
+
+    def _simulate_one_step_collide_once(self):
+        dt = self.config.dt
+        h = self.substep_dt
+        margin = self.config.speculative_margin
+        # the speculative windows cover the whole step: terrain slots open while the gap is
+        # closable within dt, pairs are found with bounds swept over dt
+        self._stage("terrain", self.collide, self.states[0], self.contacts, dt, margin)
+        color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts, margin, dt)
+        self._color_sizes = color_sizes
+        for k in range(self.config.substeps):
+            self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
+                        h, self.body_bad_step, self.bad_count, color_sizes, k == 0)
+            self.states[0], self.states[1] = self.states[1], self.states[0]
+        self._stage("solve", self.pairs.store, self.contacts)
+        self._keep_output_buffer()
+
+    def _keep_output_buffer(self):
+        if self.config.substeps % 2 == 1:
+            # Keep the captured graph's output in the buffer it started from.
+            self.states[1].assign(self.states[0])
+            self.states[0], self.states[1] = self.states[1], self.states[0]
+
+    def _simulate_one_step_collide_each_substep(self):
         h = self.substep_dt
         for _ in range(self.config.substeps):
             self._stage("terrain", self.collide, self.states[0], self.contacts, h, self.config.speculative_margin)
             color_sizes = None
             if self.pairs is not None:
                 color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts,
-                                          self.config.speculative_margin)
+                                          self.config.speculative_margin, h)
                 self._color_sizes = color_sizes
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes)
             if self.pairs is not None:
                 self._stage("solve", self.pairs.store, self.contacts)
             self.states[0], self.states[1] = self.states[1], self.states[0]
-        if self.config.substeps % 2 == 1:
-            # Keep the captured graph's output in the buffer it started from.
-            self.states[1].assign(self.states[0])
-            self.states[0], self.states[1] = self.states[1], self.states[0]
-        if self.sleep is not None:
-            self._stage("sleep", self.sleep.update, self.states[0], self.config.dt, self.contacts, self._color_sizes)
-        wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
+        self._keep_output_buffer()
 
     def step(self, count: int = 1, check: bool = True):
         """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""

@@ -4,6 +4,9 @@
 ``collide_pair`` with A = body i and B = body j, and writes the manifold into the pair's four
 point slots; the normal points from j into i.
 
+``swept_reach`` grows each bounding radius by the distance the body can travel before the
+next collision pass, for the broad phase and the speculative margin.
+
 ``carry_pair_impulses`` gives each new point the accumulated impulses of last substep's point
 with the same feature id in the same pair (warm starting).  Last substep's pairs are sorted by
 (i, j), so the pair is found by binary search.  ``store_pairs`` copies this substep's pairs,
@@ -25,10 +28,12 @@ def collide_pairs(
     # Model
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
+    body_bound_radius: wp.array(dtype=float),
     margin: float,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
+    body_reach: wp.array(dtype=float),
     # Broad phase in
     broad_pair_body: wp.array(dtype=wp.vec2i),
     broad_pair_count: wp.array(dtype=wp.int32),
@@ -46,8 +51,10 @@ def collide_pairs(
     ij = broad_pair_body[p]
     i = ij[0]
     j = ij[1]
+    # each body's sweep (reach - bound radius) widens the speculative margin, see swept_reach
+    pair_margin = margin + (body_reach[i] - body_bound_radius[i]) + (body_reach[j] - body_bound_radius[j])
     m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i],
-                     body_shape[j], body_pos[j], body_rot[j], body_size[j], margin)
+                     body_shape[j], body_pos[j], body_rot[j], body_size[j], pair_margin)
     pair_body[p] = ij
     pair_point_count[p] = m.count
     pair_normal[p] = m.normal
@@ -56,6 +63,33 @@ def collide_pairs(
         pair_point[slot] = wp.vec3(m.point[k, 0], m.point[k, 1], m.point[k, 2])
         pair_depth[slot] = m.depth[k]
         pair_feature[slot] = m.feature[k]
+
+
+@wp.kernel
+def swept_reach(
+    tid_offset: int,
+    # Model
+    body_bound_radius: wp.array(dtype=float),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    # Settings
+    sweep_time: float,
+    # State in
+    body_rot: wp.array(dtype=wp.mat33),
+    body_vel: wp.array(dtype=wp.vec3),
+    body_angmom: wp.array(dtype=wp.vec3),
+    # Out
+    body_reach: wp.array(dtype=float),
+):
+    """Bounding radius grown by how far a surface point can move before the next collision pass:
+    sweep_time (|v| + |w| r).  Two bodies whose grown spheres do not meet cannot touch before
+    then, so pairs found with these radii (and speculative points kept within the summed
+    growth) miss no contact the solver needs, however few times per step they are found."""
+    i = wp.tid() + tid_offset
+    r = body_bound_radius[i]
+    rot = body_rot[i]
+    local_angmom = wp.transpose(rot) * body_angmom[i]
+    omega = wp.cw_mul(body_inv_inertia[i], local_angmom)
+    body_reach[i] = r + sweep_time * (wp.length(body_vel[i]) + wp.length(omega) * r)
 
 
 @wp.func

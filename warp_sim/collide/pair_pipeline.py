@@ -1,4 +1,4 @@
-"""Body-body contact for one substep: broad phase -> narrow phase -> warm-start carry -> colouring.
+"""Body-body contact, found once per step or per substep (SimConfig.contact_update): broad phase -> narrow phase -> warm-start carry -> colouring.
 
 Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel; the
 only host read is the colour sizes the solver needs to size its launches (on CUDA the launches
@@ -13,7 +13,7 @@ import warp as wp
 from ..launch import launch
 from ..solvers.coloring import COLOR_COUNT, color_pairs
 from .broad_phase import make_broad_phase
-from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs
+from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach
 
 
 class PairContactPipeline:
@@ -26,15 +26,25 @@ class PairContactPipeline:
         self.body_color_mask = wp.zeros(n, dtype=wp.int32, device=device)
         self.pair_color = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
         self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
+        self.body_reach = wp.zeros(n, dtype=float, device=device)
 
-    def collide(self, state, contacts, margin: float) -> list[int]:
-        """Find this substep's pairs and manifolds; returns the pair count of each colour."""
+    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
+        """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
+
+        ``sweep_time`` is the time until the next collision pass: each body's bounding sphere
+        grows by how far it can move in it (narrow_phase.swept_reach), so a pair found once
+        per step still covers contacts made late in the step.
+        """
         m = self.model
-        self.broad.run(state.body_pos, m.body_bound_radius, m.body_inv_mass, margin)
+        launch(swept_reach, m.body_count, key=self, inputs=[
+            m.body_bound_radius, m.body_inv_inertia, float(sweep_time),
+            state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
+        self.broad.invalidate_radii()  # the grid cell follows the largest swept radius
+        self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin)
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
         launch(collide_pairs, self.capacity, key=self, inputs=[
-            m.body_shape, m.body_size, margin, state.body_pos, state.body_rot,
+            m.body_shape, m.body_size, m.body_bound_radius, margin, state.body_pos, state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
             contacts.pair_depth, contacts.pair_feature], device=self.device)
@@ -55,7 +65,7 @@ class PairContactPipeline:
         m = self.model
         self.broad.run(state.body_pos, m.body_bound_radius, m.body_inv_mass, 0.0)
         launch(collide_pairs, self.capacity, [
-            m.body_shape, m.body_size, 0.0, state.body_pos, state.body_rot,
+            m.body_shape, m.body_size, m.body_bound_radius, 0.0, state.body_pos, state.body_rot, m.body_bound_radius,
             self.broad.pair_body, self.broad.pair_count,
             probe.pair_body, probe.pair_point_count, probe.pair_normal, probe.pair_point,
             probe.pair_depth, probe.pair_feature], self.device)

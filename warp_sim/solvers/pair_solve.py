@@ -64,7 +64,6 @@ def solve_one_pair(
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
-    body_pos: wp.array(dtype=wp.vec3),
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
     pair_normal: wp.array(dtype=wp.vec3),
@@ -73,8 +72,9 @@ def solve_one_pair(
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_shift_v: wp.array(dtype=wp.vec3),
-    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
@@ -86,8 +86,12 @@ def solve_one_pair(
     inv_mj = body_inv_mass[j]
     inv_ii = solver_inv_inertia[i]
     inv_ij = solver_inv_inertia[j]
-    xi = body_pos[i]
-    xj = body_pos[j]
+    xi = solver_ref_pos[i]
+    xj = solver_ref_pos[j]
+    drift_pi = solver_drift_p[i]
+    drift_pj = solver_drift_p[j]
+    drift_ri = solver_drift_r[i]
+    drift_rj = solver_drift_r[j]
     vel = PairVelocity()
     vel.vi = solver_v[i]
     vel.wi = solver_w[i]
@@ -117,11 +121,9 @@ def solve_one_pair(
                 pair_normal_impulse[slot] = acc + extra
                 vel = apply_pair_impulse(vel, extra * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
         else:
-            separation = -pair_depth[slot]
-            if mode == MODE_RELAX:
-                dpi = solver_shift_v[i] + wp.cross(solver_shift_w[i], ri)
-                dpj = solver_shift_v[j] + wp.cross(solver_shift_w[j], rj)
-                separation = separation + wp.dot(dpi - dpj, n)
+            # the gap found at the reference pose, grown by how far the anchors have moved apart
+            moved = (drift_pi + drift_ri * ri) - (drift_pj + drift_rj * rj)
+            separation = -pair_depth[slot] + wp.dot(moved, n)
             # Non-penetration
             bias = float(0.0)
             mass_scale = float(1.0)
@@ -180,8 +182,6 @@ def pair_pass(
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
-    # State in
-    body_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
@@ -192,14 +192,15 @@ def pair_pass(
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_shift_v: wp.array(dtype=wp.vec3),
-    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
         solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution, h, soft,
-                       max_push_velocity, restitution_threshold, body_pos, pair_body, pair_point_count,
+                       max_push_velocity, restitution_threshold, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
-                       solver_inv_inertia, solver_shift_v, solver_shift_w, solver_v, solver_w)
+                       solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)

@@ -21,15 +21,24 @@ from .soft_step import soft_coefficients, solve_and_integrate
 from .staged import finalize_bodies, integrate_positions, prepare_bodies, terrain_restitution, terrain_sweep
 
 
+# A pair carries up to four points, each solved with normal and friction rows: worth a core from
+# a few hundred pairs on (bench/rain.py at 10k bodies, colours of 2.6k / 1.7k / 0.8k pairs)
+PAIR_MIN_CHUNK = 4096
+
+
 @dataclass
 class SolverSettings:
-    """Contact solver constants; defaults follow Box2D v3 / Solver2D (4 + 2 sweeps, zeta 10) except the
-    contact stiffness: 60 Hz, Box2D's own cap of a quarter of the substep rate at 4 substeps of 1/60 s."""
+    """Contact solver constants (SimConfig documents each).  Sweeps per substep: 2 with bias plus 1
+    relax.  Box2D v3 does 1 + 1; in 3-D that let a pyramid of base 10 creep 2.5 cm in 4 s, while
+    2 + 1 holds it to 0.5 mm and a 20-box stack to 5 mm, at 3/4 of the cost of the 4 + 2 of
+    Solver2D's tests (tests/test_body_contact.py).  Contact stiffness: 60 Hz, Box2D's own cap of a
+    quarter of the substep rate at 4 substeps of 1/60 s (30 Hz, its 2-D default, lets a 3-D
+    stack of 20 fall)."""
 
     integrator: str = "semi_implicit"
     rotation: str = "quaternion"
-    iterations: int = 4
-    relax_iterations: int = 2
+    iterations: int = 2
+    relax_iterations: int = 1
     contact_hertz: float = 60.0  # capped at 1/(4 h); 30 Hz (Box2D's 2-D default) lets 3-D stacks of 20 fall
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
@@ -52,6 +61,11 @@ class SoftStepSolver:
         self.solver_rolling = wp.zeros(n, dtype=wp.vec3, device=device)
         self.solver_shift_v = wp.zeros(n, dtype=wp.vec3, device=device)
         self.solver_shift_w = wp.zeros(n, dtype=wp.vec3, device=device)
+        # pose at which the contacts were found, and the motion since (staged.py)
+        self.solver_ref_pos = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_ref_rot = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.solver_drift_p = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_drift_r = wp.zeros(n, dtype=wp.mat33, device=device)
 
     def _soft(self, dt: float):
         # one vec3 object per dt, so recorded launches see an unchanged argument
@@ -60,15 +74,40 @@ class SoftStepSolver:
             self._soft_value = soft_coefficients(dt, self.settings.contact_hertz, self.settings.damping_ratio)
         return self._soft_value
 
-    def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None):
-        """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path."""
+    def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
+             fresh_contacts: bool = True):
+        """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path.
+
+        ``fresh_contacts``: the contacts were found at ``state_in`` (else at an earlier substep's
+        state, whose pose the staged solver keeps as the anchors' reference).
+        """
         if self.settings.solver == "pushout":
             self._step_pushout(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
                                color_sizes or [])
         elif color_sizes is None:
             self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
         else:
-            self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes)
+            self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
+                              fresh_contacts)
+
+    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool):
+        launch(prepare_bodies, m.body_count, key=self, inputs=[
+            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
+            self.gravity, dt, integrator, int(fresh_contacts),
+            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0,
+            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r], device=self.device)
+
+    def _integrate_positions(self, m, state_in, state_out, dt, integrator):
+        launch(integrate_positions, m.body_count, key=self, inputs=[
+            m.body_shape, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator,
+            ROTATIONS[self.settings.rotation],
+            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
+            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r,
+            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=self.device)
 
     def _step_fused(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count):
         s = self.settings
@@ -99,7 +138,8 @@ class SoftStepSolver:
             device=self.device,
         )
 
-    def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes):
+    def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
+                     fresh_contacts):
         s = self.settings
         m, c = model, contacts
         n = m.body_count
@@ -107,24 +147,17 @@ class SoftStepSolver:
         soft = self._soft(dt)
         dev = self.device
 
-        launch(prepare_bodies, n, key=self, inputs=[
-            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.gravity, dt, integrator,
-            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0], device=dev)
+        self._prepare(m, c, state_in, dt, integrator, fresh_contacts)
 
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[
                 m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_rolling_resistance,
                 m.body_checkpoint_start, m.body_checkpoint_count,
                 dt, use_bias, soft, s.max_push_velocity,
-                state_in.body_pos,
                 c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
                 c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v, self.solver_w,
-                self.solver_rolling], device=dev)
+                self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+                self.solver_v, self.solver_w, self.solver_rolling], device=dev)
 
         def pairs(mode: int):
             for color, size in enumerate(color_sizes):
@@ -135,21 +168,16 @@ class SoftStepSolver:
                     mode, color, c.color_start, c.color_pairs_sorted,
                     m.body_inv_mass, m.body_friction, m.body_restitution,
                     dt, soft, s.max_push_velocity, s.restitution_threshold,
-                    state_in.body_pos,
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
                     c.pair_normal_impulse, c.pair_tangent_impulse,
-                    self.solver_inv_inertia, self.solver_shift_v, self.solver_shift_w, self.solver_v,
-                    self.solver_w], device=dev)
+                    self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+                    self.solver_v, self.solver_w], device=dev, min_chunk=PAIR_MIN_CHUNK)
 
         pairs(MODE_WARM_START)
         for _ in range(s.iterations):
             terrain(1)
             pairs(MODE_SOLVE)
-        launch(integrate_positions, n, key=self, inputs=[
-            m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator, ROTATIONS[s.rotation],
-            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
-            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=dev)
+        self._integrate_positions(m, state_in, state_out, dt, integrator)
         for _ in range(s.relax_iterations):
             terrain(0)
             pairs(MODE_RELAX)
@@ -158,10 +186,10 @@ class SoftStepSolver:
         for phase, mode in phases:
             launch(terrain_restitution, n, key=self, inputs=[
                 m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
-                s.restitution_threshold, phase, state_in.body_pos,
+                s.restitution_threshold, phase,
                 c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                 c.terrain_contact_normal_impulse,
-                self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
+                self.solver_inv_inertia, self.solver_ref_pos, self.solver_v, self.solver_w], device=dev)
             pairs(mode)
         launch(finalize_bodies, n, key=self, inputs=[
             m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
@@ -178,13 +206,7 @@ class SoftStepSolver:
         n = m.body_count
         integrator = INTEGRATORS[s.integrator]
         dev = self.device
-        launch(prepare_bodies, n, key=self, inputs=[
-            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.gravity, dt, integrator,
-            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0], device=dev)
+        self._prepare(m, c, state_in, dt, integrator, True)
 
         def pairs(position_pass: int):
             for color, size in enumerate(color_sizes):
@@ -201,11 +223,7 @@ class SoftStepSolver:
             state_in.body_pos, c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
             c.terrain_contact_depth, self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
         pairs(0)
-        launch(integrate_positions, n, key=self, inputs=[
-            m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator, ROTATIONS[s.rotation],
-            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
-            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=dev)
+        self._integrate_positions(m, state_in, state_out, dt, integrator)
         for _ in range(s.iterations):
             launch(pushout_terrain_position, n, key=self, inputs=[
                 m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state_in.body_pos,

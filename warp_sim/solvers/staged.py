@@ -2,7 +2,7 @@
 
 The same algorithm as soft_step.py (read its docstring for the derivation), split into
 launches because a pair couples two bodies: per-body stages run one thread per body, pair
-stages one thread per pair of one colour (pairs of a colour share no dynamic body).
+stages one thread per pair of one colour (pairs of a colour share no dynamic body).  One substep:
 
     prepare (body) -> warm start (pairs, by colour)
     -> iterations x [terrain sweep (body), pair sweep (each colour)]       with soft bias
@@ -12,21 +12,31 @@ stages one thread per pair of one colour (pairs of a colour share no dynamic bod
        see soft_step.restitution_impulse
     -> finalize (body)
 
+Contacts found once serve several substeps (Box2D v3's soft step; SimConfig.contact_update):
+the pose at which they were found is the reference.  Anchor arms r = p - x_ref stay fixed
+("fixed anchors", Solver2D's soft step), and every sweep measures the gap as the one found,
+grown by how far the two anchors have since moved apart along n:
+
+    s = -depth + n . ((dp_i + D_i r_i) - (dp_j + D_j r_j)),   dp = x - x_ref
+
+with D from soft_step.drift_rotation (R R_ref^T - I for a box, 0 for a sphere).  This is the
+first-order (tangent-plane) gap: on a surface of curvature k a point sliding a distance d
+drifts k d^2 / 2 from it until the next collision pass corrects it.
+
 Pair contact algebra, for a point with arms r_i = p - x_i, r_j = p - x_j and normal n (j -> i):
 
     v_rel = (v_i + w_i x r_i) - (v_j + w_j x r_j),   v_n = v_rel . n
     k_n   = 1/m_i + 1/m_j + (r_i x n) . I_i^-1 (r_i x n) + (r_j x n) . I_j^-1 (r_j x n)
 
 impulse P = lambda n goes +P to i and -P to j.  Friction mixes as mu = sqrt(mu_i mu_j) and
-restitution as max(e_i, e_j) (Box2D's rules).  During relax the gap is corrected by the
-relative drift of the two contact points, as Box2D does with its body delta positions.
+restitution as max(e_i, e_j) (Box2D's rules).
 """
 
 import warp as wp
 
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
-from .soft_step import BodyVelocity, restitution_pass, sweep, warm_start_terrain
+from .soft_step import BodyVelocity, drift_rotation, restitution_pass, sweep, warm_start_terrain
 
 wp.set_module_options({"enable_backward": False})
 
@@ -55,6 +65,7 @@ def prepare_bodies(
     gravity: wp.vec3,
     h: float,
     integrator: int,
+    reset_reference: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
@@ -72,9 +83,19 @@ def prepare_bodies(
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_rolling: wp.array(dtype=wp.vec3),
     solver_w0: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
 ):
     i = wp.tid() + tid_offset
     solver_rolling[i] = wp.vec3(0.0)
+    if reset_reference != 0:
+        # the contacts were just found at this pose: anchors are measured from it
+        solver_ref_pos[i] = body_pos[i]
+        solver_ref_rot[i] = body_rot[i]
+        solver_drift_p[i] = wp.vec3(0.0)
+        solver_drift_r[i] = wp.mat33(0.0)
     inv_mass = body_inv_mass[i]
     if inv_mass == 0.0:
         solver_v[i] = wp.vec3(0.0)
@@ -87,7 +108,7 @@ def prepare_bodies(
     vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
     vel.w = inv_inertia * body_angmom[i]
     solver_w0[i] = vel.w
-    vel = warm_start_terrain(body_checkpoint_start[i], body_checkpoint_count[i], body_pos[i], vel, inv_mass,
+    vel = warm_start_terrain(body_checkpoint_start[i], body_checkpoint_count[i], solver_ref_pos[i], vel, inv_mass,
                              inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
                              terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
     solver_v[i] = vel.v
@@ -111,8 +132,6 @@ def terrain_sweep(
     use_bias: int,
     soft: wp.vec3,
     max_push_velocity: float,
-    # State in
-    body_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
@@ -122,8 +141,9 @@ def terrain_sweep(
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_shift_v: wp.array(dtype=wp.vec3),
-    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
     solver_rolling: wp.array(dtype=wp.vec3),
@@ -135,14 +155,9 @@ def terrain_sweep(
     rolling = float(0.0)
     if body_shape[i] == SHAPE_SPHERE:
         rolling = body_rolling_resistance[i] * body_size[i][0]
-    shift_v = wp.vec3(0.0)
-    shift_w = wp.vec3(0.0)
-    if use_bias == 0:
-        shift_v = solver_shift_v[i]
-        shift_w = solver_shift_w[i]
     vel = load_velocity(i, solver_v, solver_w, solver_rolling)
-    vel = sweep(body_checkpoint_start[i], count, body_pos[i], vel, body_inv_mass[i], solver_inv_inertia[i],
-                body_friction[i], rolling, h, use_bias, soft, max_push_velocity, shift_v, shift_w,
+    vel = sweep(body_checkpoint_start[i], count, solver_ref_pos[i], vel, body_inv_mass[i], solver_inv_inertia[i],
+                body_friction[i], rolling, h, use_bias, soft, max_push_velocity, solver_drift_p[i], solver_drift_r[i],
                 terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth,
                 terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
     solver_v[i] = vel.v
@@ -154,6 +169,7 @@ def terrain_sweep(
 def integrate_positions(
     tid_offset: int,
     # Model
+    body_shape: wp.array(dtype=wp.int32),
     body_inv_mass: wp.array(dtype=float),
     body_inertia: wp.array(dtype=wp.vec3),
     body_inv_inertia: wp.array(dtype=wp.vec3),
@@ -172,6 +188,10 @@ def integrate_positions(
     solver_w0: wp.array(dtype=wp.vec3),
     solver_shift_v: wp.array(dtype=wp.vec3),
     solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     # State out
     body_pos_out: wp.array(dtype=wp.vec3),
     body_quat_out: wp.array(dtype=wp.quat),
@@ -187,17 +207,22 @@ def integrate_positions(
         body_rot_out[i] = rot
         solver_shift_v[i] = wp.vec3(0.0)
         solver_shift_w[i] = wp.vec3(0.0)
+        solver_drift_p[i] = wp.vec3(0.0)
+        solver_drift_r[i] = wp.mat33(0.0)
         return
     v = solver_v[i]
     w = solver_w[i]
     # L changes only by what the contacts did (w - w0): free flight keeps L bit-exact
     angmom = body_angmom_in[i] + world_inertia(rot, body_inertia[i]) * (w - solver_w0[i])
     q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], angmom, h, integrator, rotation)
-    body_pos_out[i] = x + h * v
+    x_new = x + h * v
+    body_pos_out[i] = x_new
     body_quat_out[i] = q_new
     body_rot_out[i] = rot_new
     solver_shift_v[i] = h * v
     solver_shift_w[i] = h * w
+    solver_drift_p[i] = x_new - solver_ref_pos[i]
+    solver_drift_r[i] = drift_rotation(body_shape[i], rot_new, solver_ref_rot[i])
 
 
 @wp.kernel
@@ -210,8 +235,6 @@ def terrain_restitution(
     body_checkpoint_count: wp.array(dtype=wp.int32),
     restitution_threshold: float,
     phase: int,
-    # State in
-    body_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
@@ -219,6 +242,7 @@ def terrain_restitution(
     terrain_contact_normal_impulse: wp.array(dtype=float),
     # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
@@ -227,7 +251,7 @@ def terrain_restitution(
     e = body_restitution[i]
     if inv_mass == 0.0 or e == 0.0:
         return
-    x = body_pos[i]
+    x = solver_ref_pos[i]
     inv_inertia = solver_inv_inertia[i]
     vel = BodyVelocity()
     vel.v = solver_v[i]
