@@ -59,13 +59,14 @@ def state_gate(sim, depth_slop: float = 0.01, speed_bound: float = 100.0) -> str
     return ""
 
 
-def write_rows(name: str, rows: list[dict], meta: dict) -> tuple[Path, Path]:
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    csv_path = RESULTS / f"{name}.csv"
+def write_rows(name: str, rows: list[dict], meta: dict, out_dir: Path | None = None) -> tuple[Path, Path]:
+    out_dir = Path(out_dir) if out_dir is not None else RESULTS
+    out_dir.mkdir(parents=True, exist_ok=True)
+    csv_path = out_dir / f"{name}.csv"
     with csv_path.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         writer.writeheader()
         writer.writerows(rows)
-    json_path = RESULTS / f"{name}.json"
+    json_path = out_dir / f"{name}.json"
     json_path.write_text(json.dumps({"machine": meta, "rows": rows}, indent=2))
     return csv_path, json_path

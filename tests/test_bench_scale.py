@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench import peer_engines, peers, report, scaling, sweep  # noqa: E402
+from bench import peer_engines, peers, rain, report, scaling, sweep  # noqa: E402
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -198,3 +198,17 @@ def test_report_has_a_table_per_results_file(results, tmp_path):
         assert f"{png})" in text, png
     # goals are judged from the data: the tiny peers run has no peer engine
     assert "NOT MEASURED" in text
+
+
+def test_rain_compares_both_contact_update_modes(tmp_path):
+    """bench/rain.py at a tiny size: one row per mode, each timed and with its landing depth."""
+    assert rain.main(["--counts", "60", "--broad-phases", "grid", "--settle", "0.3", "--steps", "3",
+                      "--out-dir", str(tmp_path)]) == 0
+    rows = read_csv(tmp_path / "rain_cpu.csv")
+    assert [r["contact_update"] for r in rows] == ["step", "substep"]
+    for r in rows:
+        assert r["status"] == "ok"
+        for key in ("steps_per_s", "peak_penetration_m", "max_penetration_m"):
+            assert is_number(r[key]), (key, r[key])
+        assert float(r["peak_penetration_m"]) > 0.0  # bodies landed: some contact was probed
+    assert_png(tmp_path / "rain_cpu.png")
