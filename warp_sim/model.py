@@ -47,7 +47,6 @@ class Model:
         self.body_friction = arr("body_friction", float)
         self.body_rolling_resistance = arr("body_rolling_resistance", float)
         self.has_restitution = bool(np.any(host["body_restitution"] > 0.0))
-        self.has_boxes = bool(np.any(host["body_checkpoint_count"] > 4))  # terrain manifolds to reduce
         self.body_checkpoint_start = arr("body_checkpoint_start", wp.int32)
         self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)
         self.checkpoint_body = arr("checkpoint_body", wp.int32)

@@ -31,7 +31,6 @@ import warp as wp
 from .collide import collide_terrain
 from .collide.broad_phase import BROAD_PHASES
 from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
-from .collide.terrain_manifold import reduce_terrain_manifold
 from .sleep import AwakeModel, Sleep
 from .launch import launch
 from .model import Model
@@ -148,8 +147,7 @@ class Simulator:
     def substep_dt(self) -> float:
         return self.config.dt / self.config.substeps
 
-    def collide(self, state, contacts, h: float, speculative_margin: float, reduce: bool = True):
-        """Terrain contacts of ``state``; ``reduce`` trims each box's to four points (terrain_manifold.py)."""
+    def collide(self, state, contacts, h: float, speculative_margin: float):
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
@@ -173,12 +171,6 @@ class Simulator:
             ],
             device=self.device,
         )
-        if reduce and m.has_boxes:
-            launch(reduce_terrain_manifold, dim=m.body_count, key=contacts, inputs=[
-                m.body_checkpoint_start, m.body_checkpoint_count, state.body_pos,
-                contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
-                contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
-                contacts.terrain_contact_tangent_impulse], device=self.device)
 
     def _stage(self, name: str, fn, *args):
         """Run one stage; with ``profile`` set, synchronise and add its wall time to stage_times."""
@@ -363,7 +355,7 @@ class Simulator:
         # start the probe's closest-point searches where the live contacts left off
         wp.copy(self._probe.terrain_contact_active, self.contacts.terrain_contact_active)
         wp.copy(self._probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
-        self.collide(self.state, self._probe, self.substep_dt, 0.0, reduce=False)
+        self.collide(self.state, self._probe, self.substep_dt, 0.0)
         depths = self._probe.active_terrain_depths()
         deepest = float(max(depths.max(), 0.0)) if depths.size else 0.0
         if self.pairs is not None:
