@@ -62,14 +62,12 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK) -> None:
-    """Launch ``kernel`` over ``dim`` items, split into chunks of at least ``min_chunk`` items
-    across the CPU cores (``min_chunk`` lower for kernels whose items are heavy)."""
+def launch(kernel, dim: int, inputs: list, device, key=None) -> None:
     device = wp.get_device(device)
     if dim <= 0:
         return
     threads = cpu_threads() if device.is_cpu else 1
-    chunks = min(threads, dim // max(min_chunk, 1))
+    chunks = min(threads, dim // MIN_CHUNK)
     warm_key = (kernel, device.alias)
     if warm_key not in _warm:
         # the first launch compiles and loads the module: do it on this thread, whole

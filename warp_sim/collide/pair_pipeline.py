@@ -1,4 +1,5 @@
-"""Body-body contact, found once per step or per substep (SimConfig.contact_update): broad phase -> narrow phase -> warm-start carry -> colouring.
+"""Body-body contact, found once per step or per substep (SimConfig.contact_update):
+broad phase -> narrow phase -> warm-start carry -> colouring.
 
 Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel; the
 only host read is the colour sizes the solver needs to size its launches (on CUDA the launches

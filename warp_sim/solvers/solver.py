@@ -21,11 +21,6 @@ from .soft_step import soft_coefficients, solve_and_integrate
 from .staged import finalize_bodies, integrate_positions, prepare_bodies, terrain_restitution, terrain_sweep
 
 
-# A pair carries up to four points, each solved with normal and friction rows: worth a core from
-# a few hundred pairs on (bench/rain.py at 10k bodies, colours of 2.6k / 1.7k / 0.8k pairs)
-PAIR_MIN_CHUNK = 4096
-
-
 @dataclass
 class SolverSettings:
     """Contact solver constants (SimConfig documents each).  Sweeps per substep: 2 with bias plus 1
@@ -171,7 +166,7 @@ class SoftStepSolver:
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
                     c.pair_normal_impulse, c.pair_tangent_impulse,
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                    self.solver_v, self.solver_w], device=dev, min_chunk=PAIR_MIN_CHUNK)
+                    self.solver_v, self.solver_w], device=dev)
 
         pairs(MODE_WARM_START)
         for _ in range(s.iterations):
