@@ -17,38 +17,43 @@ def omega(h: float) -> float:
     return 2.0 * math.pi * min(SimConfig().contact_hertz, 0.25 / h)
 
 
-def stack(count: int, **config) -> Simulator:
+def stack(count: int, top_down: bool = False, **config) -> Simulator:
+    """A column of unit boxes; ``top_down`` adds them from the top, reversing the body order."""
     b = ModelBuilder(Material(friction=0.6))
     b.set_terrain(PlaneTerrain())
-    for k in range(count):
+    for k in reversed(range(count)) if top_down else range(count):
         b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
     config.setdefault("sleep", False)  # measure the solver, not sleeping
     return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, **config))
 
 
-def test_stack_of_ten_unit_boxes_stands_for_ten_seconds():
+@pytest.mark.parametrize("schedule,top_down", [("domains", False), ("domains", True), ("colors", False)])
+def test_stack_of_ten_unit_boxes_stands_for_ten_seconds(schedule, top_down):
     """The soft contact is a spring: a point of effective mass m_eff = 1/k_n under load W sags
     W / (m_eff omega^2).  Unit cubes: a face has 4 points, k_n = 4 against the ground and 8
     between two boxes, so the column sags 10 g/w^2 + sum_k 2 (10 - k) g/w^2 = 100 g / omega^2
     (7 mm at 60 Hz) in its first second.  That is compliance, not drift: from then on the top
-    box must move less than 1 cm over the remaining 9 s."""
-    sim = stack(10)
-    top0 = sim.state.body_pos.numpy()[-1].copy()
+    box must move less than 1 cm over the remaining 9 s.  Both pair schedules; the slab sweep
+    walks the bodies in order, so the stack is also built with its body order reversed."""
+    sim = stack(10, top_down, pair_schedule=schedule)
+    top = 0 if top_down else -1
+    top0 = sim.state.body_pos.numpy()[top].copy()
     sim.step(60)
-    settled = sim.state.body_pos.numpy()[-1].copy()
+    settled = sim.state.body_pos.numpy()[top].copy()
     assert top0[1] - settled[1] == pytest.approx(100 * G / omega(sim.substep_dt) ** 2, rel=0.05)
     sim.step(540)
-    assert np.linalg.norm(sim.state.body_pos.numpy()[-1] - settled) < 0.01
+    assert np.linalg.norm(sim.state.body_pos.numpy()[top] - settled) < 0.01
 
 
-def test_pyramid_of_base_ten_stands():
+@pytest.mark.parametrize("schedule", ["domains", "colors"])
+def test_pyramid_of_base_ten_stands(schedule):
     """55 boxes in a 2-D pyramid: after settling (1 s) no box moves more than 1 cm in 4 s."""
     b = ModelBuilder(Material(friction=0.6))
     b.set_terrain(PlaneTerrain())
     for row in range(10):
         for k in range(10 - row):
             b.add_box((0.5, 0.5, 0.5), 1.0, position=(k - (9 - row) / 2.0, 0.5 + row, 0.0))
-    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False, pair_schedule=schedule))
     sim.step(60)
     settled = sim.state.body_pos.numpy().copy()
     sim.step(240)

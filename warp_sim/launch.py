@@ -62,12 +62,14 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def launch(kernel, dim: int, inputs: list, device, key=None) -> None:
+def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK) -> None:
+    """``min_chunk``: the fewest indices worth a thread of their own (1 for kernels whose
+    threads each carry a large share of the work, such as solvers/domains.py's slabs)."""
     device = wp.get_device(device)
     if dim <= 0:
         return
     threads = cpu_threads() if device.is_cpu else 1
-    chunks = min(threads, dim // MIN_CHUNK)
+    chunks = min(threads, dim // min_chunk)
     warm_key = (kernel, device.alias)
     if warm_key not in _warm:
         # the first launch compiles and loads the module: do it on this thread, whole

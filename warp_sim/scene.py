@@ -32,7 +32,7 @@ import numpy as np
 
 from .builder import Material, ModelBuilder
 from .collide.broad_phase import BROAD_PHASES
-from .simulator import CONTACT_UPDATES, SOLVERS, SimConfig, Simulator
+from .simulator import CONTACT_UPDATES, PAIR_SCHEDULES, SOLVERS, SimConfig, Simulator
 from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 from .types import FRICTION_MODELS, INTEGRATORS, ROTATIONS, SHAPES
 
@@ -351,6 +351,7 @@ SIM_SCHEMA = {
     "broad_phase": Choice(tuple(BROAD_PHASES)),
     "contact_max": Integer(ge=0),
     "contact_update": Choice(CONTACT_UPDATES),
+    "pair_schedule": Choice(PAIR_SCHEDULES),
 }
 
 TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")

@@ -32,7 +32,7 @@ from .collide import collide_terrain
 from .collide.broad_phase import BROAD_PHASES
 from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
-from .launch import launch
+from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
@@ -41,6 +41,7 @@ from .types import SHAPE_BOX
 
 SOLVERS = ("soft_step", "pushout")
 CONTACT_UPDATES = ("step", "substep")
+PAIR_SCHEDULES = ("auto", "domains", "colors")
 
 
 class NonFiniteStateError(RuntimeError):
@@ -78,6 +79,7 @@ class SimConfig:
     broad_phase: str = "grid"
     contact_max: int = 0
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
+    pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
 
     def solver_settings(self) -> SolverSettings:
         return SolverSettings(
@@ -106,6 +108,8 @@ class Simulator:
         if config.contact_update not in CONTACT_UPDATES:
             raise ValueError(f"contact_update must be one of {', '.join(CONTACT_UPDATES)}, "
                              f"got {config.contact_update!r}")
+        if config.pair_schedule not in PAIR_SCHEDULES:
+            raise ValueError(f"pair_schedule must be one of {', '.join(PAIR_SCHEDULES)}, got {config.pair_schedule!r}")
         if config.broad_phase not in BROAD_PHASES:
             raise ValueError(f"broad_phase must be one of {', '.join(BROAD_PHASES)}, got {config.broad_phase!r}")
         self.model = model
@@ -125,7 +129,8 @@ class Simulator:
         capacity = 0
         if config.body_contact and model.body_count >= 2 and dynamic >= 1:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
-            self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device)
+            self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device,
+                                             self._domain_count(config))
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -183,6 +188,15 @@ class Simulator:
         self.stage_times[name] = self.stage_times.get(name, 0.0) + time.perf_counter() - start
         return out
 
+    def _domain_count(self, config) -> int:
+        """Slabs for the CPU pair schedule (solvers/domains.py): one per CPU thread; 0 = colours."""
+        schedule = config.pair_schedule
+        if schedule == "domains" and not self.device.is_cpu:
+            raise ValueError(f"pair_schedule 'domains' runs on the CPU only, got device {config.device!r}")
+        if config.solver != "soft_step" or schedule == "colors" or not self.device.is_cpu:
+            return 0
+        return cpu_threads()
+
     def _collides_once_per_step(self) -> bool:
         return self.pairs is not None and self.config.contact_update == "step" and self.config.solver == "soft_step"
 
@@ -206,7 +220,7 @@ class Simulator:
         self._color_sizes = color_sizes
         for k in range(self.config.substeps):
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
-                        h, self.body_bad_step, self.bad_count, color_sizes, k == 0)
+                        h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule())
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._stage("solve", self.pairs.store, self.contacts)
         self._keep_output_buffer()
@@ -222,12 +236,14 @@ class Simulator:
         for _ in range(self.config.substeps):
             self._stage("terrain", self.collide, self.states[0], self.contacts, h, self.config.speculative_margin)
             color_sizes = None
+            domains = None
             if self.pairs is not None:
                 color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts,
                                           self.config.speculative_margin, h)
                 self._color_sizes = color_sizes
+                domains = self.pairs.domain_schedule()
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
-                        h, self.body_bad_step, self.bad_count, color_sizes)
+                        h, self.body_bad_step, self.bad_count, color_sizes, True, domains)
             if self.pairs is not None:
                 self._stage("solve", self.pairs.store, self.contacts)
             self.states[0], self.states[1] = self.states[1], self.states[0]

@@ -8,17 +8,22 @@ could use the capacity instead and stay graph-capturable).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import warp as wp
 
 from ..launch import launch
 from ..solvers.coloring import COLOR_COUNT, color_pairs
+from ..solvers.domains import BINS, partition_domains
 from .broad_phase import make_broad_phase
 from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach
 
 
 class PairContactPipeline:
-    def __init__(self, model, broad_phase: str, capacity: int, device):
+    def __init__(self, model, broad_phase: str, capacity: int, device, domain_count: int = 0):
+        """``domain_count`` > 0 also cuts the scene into that many slabs for the CPU solver
+        schedule (solvers/domains.py); 0 leaves the colouring as the only schedule."""
         self.model = model
         self.device = device
         self.capacity = capacity
@@ -28,6 +33,19 @@ class PairContactPipeline:
         self.pair_color = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
         self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
         self.body_reach = wp.zeros(n, dtype=float, device=device)
+        self.domain_count = domain_count
+        self.boundary_pairs = 0
+        if domain_count > 0:
+            d = domain_count
+            self.body_weight = wp.zeros(n, dtype=float, device=device)
+            self.body_domain = wp.zeros(n, dtype=wp.int32, device=device)
+            self.bin_weight = wp.zeros(BINS, dtype=float, device=device)
+            self.bin_domain = wp.zeros(BINS, dtype=wp.int32, device=device)
+            self.domain_cursor = wp.zeros(d + 1, dtype=wp.int32, device=device)
+            self.domain_body_start = wp.zeros(d + 1, dtype=wp.int32, device=device)
+            self.domain_body = wp.zeros(n, dtype=wp.int32, device=device)
+            self.domain_pair_start = wp.zeros(d + 2, dtype=wp.int32, device=device)
+            self.domain_pair = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
 
     def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
@@ -58,8 +76,23 @@ class PairContactPipeline:
             m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
             self.body_color_mask, self.pair_color, self.color_cursor,
             contacts.color_start, contacts.color_pairs_sorted])
+        if self.domain_count > 0:
+            wp.launch(partition_domains, dim=1, device=self.device, inputs=[
+                self.domain_count, m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state.body_pos,
+                contacts.terrain_contact_active, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
+                self.body_weight, self.body_domain, self.bin_weight, self.bin_domain, self.domain_cursor,
+                self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair])
+            bounds = self.domain_pair_start.numpy()
+            self.boundary_pairs = int(bounds[-1] - bounds[-2])
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
+
+    def domain_schedule(self):
+        """What the solver needs to sweep by slab, or None when this pipeline only colours."""
+        if self.domain_count == 0:
+            return None
+        return DomainSchedule(self.domain_count, self.boundary_pairs, self.domain_body_start, self.domain_body,
+                              self.domain_pair_start, self.domain_pair)
 
     def probe_depth(self, state, probe) -> float:
         """Deepest body-body penetration of ``state`` [m], found afresh (broad + narrow phase only)."""
@@ -86,6 +119,16 @@ class PairContactPipeline:
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse],
             device=self.device)
+
+
+@dataclass
+class DomainSchedule:
+    domain_count: int
+    boundary_pairs: int
+    domain_body_start: wp.array
+    domain_body: wp.array
+    domain_pair_start: wp.array
+    domain_pair: wp.array
 
 
 def default_pair_capacity(body_count: int) -> int:

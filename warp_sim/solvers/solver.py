@@ -14,6 +14,8 @@ import warp as wp
 from ..launch import launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
+from .contact_rows import TerrainRow
+from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
                          MODE_WARM_START, pair_pass)
@@ -70,11 +72,13 @@ class SoftStepSolver:
         return self._soft_value
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
-             fresh_contacts: bool = True):
+             fresh_contacts: bool = True, domains=None):
         """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path.
 
         ``fresh_contacts``: the contacts were found at ``state_in`` (else at an earlier substep's
         state, whose pose the staged solver keeps as the anchors' reference).
+        ``domains``: a pair_pipeline.DomainSchedule; the staged soft step then sweeps slab by slab
+        (solvers/domains.py) instead of colour by colour.
         """
         if self.settings.solver == "pushout":
             self._step_pushout(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
@@ -83,17 +87,24 @@ class SoftStepSolver:
             self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
         else:
             self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                              fresh_contacts)
+                              fresh_contacts, domains)
 
-    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool):
+    def _terrain_rows(self, contacts):
+        rows = getattr(self, "terrain_row", None)
+        if rows is None or rows.shape[0] < contacts.terrain_contact_active.shape[0]:
+            self.terrain_row = wp.zeros(contacts.terrain_contact_active.shape[0], dtype=TerrainRow, device=self.device)
+        return self.terrain_row
+
+    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.gravity, dt, integrator, int(fresh_contacts),
+            self.gravity, dt, integrator, int(fresh_contacts), int(make_rows),
             state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
             c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0,
-            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r], device=self.device)
+            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r,
+            self._terrain_rows(c)], device=self.device)
 
     def _integrate_positions(self, m, state_in, state_out, dt, integrator):
         launch(integrate_positions, m.body_count, key=self, inputs=[
@@ -134,7 +145,7 @@ class SoftStepSolver:
         )
 
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                     fresh_contacts):
+                     fresh_contacts, domains=None):
         s = self.settings
         m, c = model, contacts
         n = m.body_count
@@ -142,7 +153,7 @@ class SoftStepSolver:
         soft = self._soft(dt)
         dev = self.device
 
-        self._prepare(m, c, state_in, dt, integrator, fresh_contacts)
+        self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True)
 
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[
@@ -152,7 +163,7 @@ class SoftStepSolver:
                 c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
                 c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
                 self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                self.solver_v, self.solver_w, self.solver_rolling], device=dev)
+                self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row], device=dev)
 
         def pairs(mode: int):
             for color, size in enumerate(color_sizes):
@@ -168,14 +179,45 @@ class SoftStepSolver:
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
                     self.solver_v, self.solver_w], device=dev)
 
-        pairs(MODE_WARM_START)
-        for _ in range(s.iterations):
-            terrain(1)
-            pairs(MODE_SOLVE)
-        self._integrate_positions(m, state_in, state_out, dt, integrator)
-        for _ in range(s.relax_iterations):
-            terrain(0)
-            pairs(MODE_RELAX)
+        def slabs(mode: int, reverse: int = 0):
+            """Terrain (solve and relax modes) and pairs of every slab at once, then the boundary pairs."""
+            g = domains
+            args = [g.domain_count, mode, reverse, g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair,
+                    m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_restitution,
+                    m.body_rolling_resistance, m.body_checkpoint_start, m.body_checkpoint_count,
+                    dt, soft, s.max_push_velocity, s.restitution_threshold,
+                    c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+                    c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                    c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
+                    c.pair_normal_impulse, c.pair_tangent_impulse,
+                    self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+                    self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row]
+            launch(domain_sweep, g.domain_count, [0, *args], dev, key=self, min_chunk=1)
+            if g.boundary_pairs:
+                launch(domain_sweep, 1, [g.domain_count, *args], dev, key=self)
+
+        if domains is not None:
+            # Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the
+            # relax sweep goes on backwards, so neither end of the body order is favoured.
+            # Measured (stack of 10 built bottom-up and top-down, pyramid of base 10; F forward,
+            # B backward): F F F: the stack still sagged 9 % past its static spring value after
+            # 1 s; B F B: the pyramid crept 15 mm; F B F: the bottom-up stack 3 % past; F B B:
+            # within 0.5 % and 0.55 mm (colours: 0.3 % and 0.8 mm).
+            slabs(MODE_WARM_START)
+            for k in range(s.iterations):
+                slabs(MODE_SOLVE, k % 2)
+            self._integrate_positions(m, state_in, state_out, dt, integrator)
+            for _ in range(s.relax_iterations):
+                slabs(MODE_RELAX, 1)
+        else:
+            pairs(MODE_WARM_START)
+            for _ in range(s.iterations):
+                terrain(1)
+                pairs(MODE_SOLVE)
+            self._integrate_positions(m, state_in, state_out, dt, integrator)
+            for _ in range(s.relax_iterations):
+                terrain(0)
+                pairs(MODE_RELAX)
         # a scene without restitution pays for no restitution passes
         phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
         for phase, mode in phases:
@@ -185,7 +227,10 @@ class SoftStepSolver:
                 c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                 c.terrain_contact_normal_impulse,
                 self.solver_inv_inertia, self.solver_ref_pos, self.solver_v, self.solver_w], device=dev)
-            pairs(mode)
+            if domains is not None:
+                slabs(mode)
+            else:
+                pairs(mode)
         launch(finalize_bodies, n, key=self, inputs=[
             m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
             state_in.body_rot, state_in.body_vel, state_in.body_angmom,
@@ -201,7 +246,7 @@ class SoftStepSolver:
         n = m.body_count
         integrator = INTEGRATORS[s.integrator]
         dev = self.device
-        self._prepare(m, c, state_in, dt, integrator, True)
+        self._prepare(m, c, state_in, dt, integrator, True, False)
 
         def pairs(position_pass: int):
             for color, size in enumerate(color_sizes):

@@ -36,21 +36,12 @@ import warp as wp
 
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
-from .soft_step import BodyVelocity, drift_rotation, restitution_pass, sweep, warm_start_terrain
+from .contact_rows import TerrainRow, make_terrain_row, solve_terrain_row
+from .soft_step import BodyVelocity, drift_rotation, restitution_pass, solve_rolling, warm_start_terrain
 
 wp.set_module_options({"enable_backward": False})
 
 POINTS = 4
-
-
-@wp.func
-def load_velocity(i: int, solver_v: wp.array(dtype=wp.vec3), solver_w: wp.array(dtype=wp.vec3),
-                  solver_rolling: wp.array(dtype=wp.vec3)) -> BodyVelocity:
-    vel = BodyVelocity()
-    vel.v = solver_v[i]
-    vel.w = solver_w[i]
-    vel.rolling_impulse = solver_rolling[i]
-    return vel
 
 
 @wp.kernel
@@ -66,6 +57,7 @@ def prepare_bodies(
     h: float,
     integrator: int,
     reset_reference: int,
+    make_rows: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
@@ -87,6 +79,7 @@ def prepare_bodies(
     solver_ref_rot: wp.array(dtype=wp.mat33),
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
+    terrain_row: wp.array(dtype=TerrainRow),
 ):
     i = wp.tid() + tid_offset
     solver_rolling[i] = wp.vec3(0.0)
@@ -108,12 +101,93 @@ def prepare_bodies(
     vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
     vel.w = inv_inertia * body_angmom[i]
     solver_w0[i] = vel.w
-    vel = warm_start_terrain(body_checkpoint_start[i], body_checkpoint_count[i], solver_ref_pos[i], vel, inv_mass,
+    x_ref = solver_ref_pos[i]
+    start = body_checkpoint_start[i]
+    count = body_checkpoint_count[i]
+    if make_rows != 0:
+        for slot in range(start, start + count):
+            if terrain_contact_active[slot] != 0:
+                terrain_row[slot] = make_terrain_row(terrain_contact_point[slot] - x_ref, terrain_contact_normal[slot],
+                                                     inv_mass, inv_inertia)
+    vel = warm_start_terrain(start, count, x_ref, vel, inv_mass,
                              inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
                              terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
     solver_v[i] = vel.v
     solver_w[i] = vel.w
     solver_inv_inertia[i] = inv_inertia
+
+
+@wp.func
+def sweep_body_terrain(
+    i: int,
+    # Model
+    body_shape: wp.array(dtype=wp.int32),
+    body_size: wp.array(dtype=wp.vec3),
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_rolling_resistance: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
+    h: float,
+    use_bias: int,
+    soft: wp.vec3,
+    max_push_velocity: float,
+    # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_rolling: wp.array(dtype=wp.vec3),
+    terrain_row: wp.array(dtype=TerrainRow),
+):
+    """One terrain sweep of body i over its active slots, with the rows built by prepare_bodies."""
+    count = body_checkpoint_count[i]
+    inv_mass = body_inv_mass[i]
+    if inv_mass == 0.0 or count == 0:
+        return
+    rolling = float(0.0)
+    if body_shape[i] == SHAPE_SPHERE:
+        rolling = body_rolling_resistance[i] * body_size[i][0]
+    friction = body_friction[i]
+    x_ref = solver_ref_pos[i]
+    drift_p = solver_drift_p[i]
+    drift_r = solver_drift_r[i]
+    v = solver_v[i]
+    w = solver_w[i]
+    rolling_impulse = solver_rolling[i]
+    start = body_checkpoint_start[i]
+    for slot in range(start, start + count):
+        if terrain_contact_active[slot] != 0:
+            n = terrain_contact_normal[slot]
+            # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
+            arm = terrain_contact_point[slot] - x_ref
+            separation = -terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
+            vw = solve_terrain_row(terrain_row[slot], n, separation, v, w, inv_mass, friction, h, use_bias, soft,
+                                   max_push_velocity, slot, terrain_contact_normal_impulse,
+                                   terrain_contact_tangent_impulse)
+            w = wp.spatial_top(vw)
+            v = wp.spatial_bottom(vw)
+            if rolling > 0.0:
+                vel = BodyVelocity()
+                vel.v = v
+                vel.w = w
+                vel.rolling_impulse = rolling_impulse
+                vel = solve_rolling(vel, n, solver_inv_inertia[i], rolling * terrain_contact_normal_impulse[slot])
+                w = vel.w
+                rolling_impulse = vel.rolling_impulse
+    solver_v[i] = v
+    solver_w[i] = w
+    solver_rolling[i] = rolling_impulse
 
 
 @wp.kernel
@@ -147,22 +221,9 @@ def terrain_sweep(
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
     solver_rolling: wp.array(dtype=wp.vec3),
+    terrain_row: wp.array(dtype=TerrainRow),
 ):
-    i = wp.tid() + tid_offset
-    count = body_checkpoint_count[i]
-    if body_inv_mass[i] == 0.0 or count == 0:
-        return
-    rolling = float(0.0)
-    if body_shape[i] == SHAPE_SPHERE:
-        rolling = body_rolling_resistance[i] * body_size[i][0]
-    vel = load_velocity(i, solver_v, solver_w, solver_rolling)
-    vel = sweep(body_checkpoint_start[i], count, solver_ref_pos[i], vel, body_inv_mass[i], solver_inv_inertia[i],
-                body_friction[i], rolling, h, use_bias, soft, max_push_velocity, solver_drift_p[i], solver_drift_r[i],
-                terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth,
-                terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
-    solver_v[i] = vel.v
-    solver_w[i] = vel.w
-    solver_rolling[i] = vel.rolling_impulse
+    sweep_body_terrain(wp.tid() + tid_offset, body_shape, body_size, body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start, body_checkpoint_count, h, use_bias, soft, max_push_velocity, terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse, terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row)
 
 
 @wp.kernel

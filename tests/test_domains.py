@@ -1,0 +1,89 @@
+"""The CPU pair schedule (solvers/domains.py): slabs that cover every body and pair exactly once."""
+
+import numpy as np
+import pytest
+
+from warp_sim import cases
+
+DOMAINS = 3  # more slabs than this machine may have cores: the schedule must not depend on them
+
+
+@pytest.fixture
+def rain(monkeypatch):
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", str(DOMAINS))
+    sim = cases.terrain_drop(400, "mix", body_contact=True, spacing=0.9, sleep=False, rolling_resistance=0.2)
+    sim.step(40)  # landed and piled: pairs and terrain contacts in every slab
+    return sim
+
+
+def partition(sim):
+    p = sim.pairs
+    return (p.domain_body_start.numpy(), p.domain_body.numpy(), p.domain_pair_start.numpy(),
+            p.domain_pair.numpy(), p.body_domain.numpy())
+
+
+def test_every_dynamic_body_is_in_exactly_one_slab(rain):
+    body_start, body_list, _, _, body_domain = partition(rain)
+    assert body_start[0] == 0 and body_start[-1] == rain.model.body_count  # all bodies are dynamic here
+    listed = body_list[: body_start[-1]]
+    assert np.array_equal(np.sort(listed), np.arange(rain.model.body_count))
+    for d in range(DOMAINS):
+        members = body_list[body_start[d]:body_start[d + 1]]
+        assert np.all(np.diff(members) > 0), "a slab walks its bodies in body order"
+        assert np.all(body_domain[members] == d)
+
+
+def test_slabs_are_ordered_along_the_cut_axis_and_balanced(rain):
+    body_start, body_list, pair_start, pair_list, body_domain = partition(rain)
+    pos = rain.state.body_pos.numpy()
+    extent = pos.max(axis=0) - pos.min(axis=0)
+    axis = 2 if extent[2] > extent[0] else 0
+    slabs = [pos[body_list[body_start[d]:body_start[d + 1]], axis] for d in range(DOMAINS)]
+    assert all(len(s) for s in slabs)
+    # bins are 1/1024 of the extent wide: neighbouring slabs may share at most one bin's width
+    bin_width = extent[axis] / 1024
+    for a, b in zip(slabs, slabs[1:]):
+        assert a.max() <= b.min() + bin_width
+    # work per slab: 1 + active terrain slots per body, plus each pair's points on both bodies
+    c = rain.contacts
+    active = c.terrain_contact_active.numpy()
+    start = rain.model.host["body_checkpoint_start"]
+    count = rain.model.host["body_checkpoint_count"]
+    weight = np.array([1.0 + active[s:s + k].sum() for s, k in zip(start, count)])
+    pairs = int(c.pair_count.numpy()[0])
+    points = c.pair_point_count.numpy()[:pairs]
+    for (i, j), k in zip(c.pair_body.numpy()[:pairs], points):
+        weight[i] += k
+        weight[j] += k
+    share = np.array([weight[body_domain == d].sum() for d in range(DOMAINS)])
+    # a slab is cut at bin granularity: it can be off its share by at most one bin's work, which in
+    # this even rain is a few bodies' worth (bound: 2 % of a share, ~10 bodies of ~5 units each)
+    assert np.abs(share - weight.sum() / DOMAINS).max() <= 0.02 * weight.sum() / DOMAINS + weight.max()
+
+
+def test_every_touching_pair_is_solved_in_exactly_one_place(rain):
+    _, _, pair_start, pair_list, body_domain = partition(rain)
+    c = rain.contacts
+    pairs = int(c.pair_count.numpy()[0])
+    touching = np.nonzero(c.pair_point_count.numpy()[:pairs] > 0)[0]
+    listed = pair_list[: pair_start[-1]]
+    assert np.array_equal(np.sort(listed), touching)
+    bodies = c.pair_body.numpy()
+    for d in range(DOMAINS):
+        for p in pair_list[pair_start[d]:pair_start[d + 1]]:
+            assert body_domain[bodies[p][0]] == d and body_domain[bodies[p][1]] == d
+    boundary = pair_list[pair_start[DOMAINS]:pair_start[DOMAINS + 1]]
+    for p in boundary:
+        assert body_domain[bodies[p][0]] != body_domain[bodies[p][1]]
+    # the cuts are planes through a pile: few pairs cross them
+    assert len(boundary) < 0.2 * len(touching)
+
+
+def test_slab_schedule_is_deterministic(monkeypatch):
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", str(DOMAINS))
+    runs = []
+    for _ in range(2):
+        sim = cases.terrain_drop(200, "mix", body_contact=True, spacing=0.9, sleep=False)
+        sim.step(30)
+        runs.append(sim.state.body_pos.numpy().tobytes() + sim.state.body_vel.numpy().tobytes())
+    assert runs[0] == runs[1]
