@@ -1,5 +1,7 @@
 """The CPU pair schedule (solvers/domains.py): slabs that cover every body and pair exactly once."""
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -34,7 +36,7 @@ def test_every_dynamic_body_is_in_exactly_one_slab(rain):
 
 
 def test_slabs_are_ordered_along_the_cut_axis_and_balanced(rain):
-    body_start, body_list, pair_start, pair_list, body_domain = partition(rain)
+    body_start, body_list, _, _, body_domain = partition(rain)
     pos = rain.state.body_pos.numpy()
     extent = pos.max(axis=0) - pos.min(axis=0)
     axis = 2 if extent[2] > extent[0] else 0
@@ -42,7 +44,7 @@ def test_slabs_are_ordered_along_the_cut_axis_and_balanced(rain):
     assert all(len(s) for s in slabs)
     # bins are 1/1024 of the extent wide: neighbouring slabs may share at most one bin's width
     bin_width = extent[axis] / 1024
-    for a, b in zip(slabs, slabs[1:]):
+    for a, b in itertools.pairwise(slabs):
         assert a.max() <= b.min() + bin_width
     # work per slab: 1 + active terrain slots per body, plus each pair's points on both bodies
     c = rain.contacts
