@@ -19,9 +19,9 @@ disc |J_t| <= mu J_n: the same impulse as computing k_t = 1/m + (r x c) . I^-1 (
 (Solving the 2-D block exactly, lambda_t = -K_t^-1 v_t, was tried: a stack of 10 boxes then
 drifted sideways 10.6 mm in 9 s instead of 2.6 mm, the coupling term amplifying rounding noise.)
 
-For a pair of bodies the rows carry both bodies' angular parts, with opposite signs (impulse P
-goes +P to body i and -P to body j): k = 1/m_i + 1/m_j + (r_i x n) . I_i^-1 (r_i x n)
-+ (r_j x n) . I_j^-1 (r_j x n).
+Body-body contacts (pair_solve.py) keep computing their effective masses in every sweep: rows
+with both bodies' angular parts (16 vectors a point) measured slower there than the arithmetic
+they save.
 """
 
 import warp as wp
@@ -43,28 +43,6 @@ class TerrainRow:
     inv_rt1: wp.vec3  # I^-1 (r x t1)
     inv_rt2: wp.vec3
     tangent_k: wp.vec3  # K_t as (a, b, c) = [[a, b], [b, c]]
-
-
-@wp.struct
-class PairRow:
-    """One body-body contact point's rows for the current substep."""
-
-    rn_i: wp.vec3
-    rn_j: wp.vec3
-    inv_rn_i: wp.vec3
-    inv_rn_j: wp.vec3
-    normal_mass: float
-    t1: wp.vec3
-    t2: wp.vec3
-    rt1_i: wp.vec3
-    rt2_i: wp.vec3
-    rt1_j: wp.vec3
-    rt2_j: wp.vec3
-    inv_rt1_i: wp.vec3
-    inv_rt2_i: wp.vec3
-    inv_rt1_j: wp.vec3
-    inv_rt2_j: wp.vec3
-    tangent_k: wp.vec3
 
 
 @wp.func
@@ -93,33 +71,6 @@ def make_terrain_row(arm: wp.vec3, n: wp.vec3, inv_mass: float, inv_inertia: wp.
     row.inv_rt2 = inv_inertia * row.rt2
     row.tangent_k = wp.vec3(inv_mass + wp.dot(row.rt1, row.inv_rt1), wp.dot(row.rt1, row.inv_rt2),
                             inv_mass + wp.dot(row.rt2, row.inv_rt2))
-    return row
-
-
-@wp.func
-def make_pair_row(ri: wp.vec3, rj: wp.vec3, n: wp.vec3, inv_mi: float, inv_mj: float, inv_ii: wp.mat33,
-                  inv_ij: wp.mat33) -> PairRow:
-    row = PairRow()
-    row.rn_i = wp.cross(ri, n)
-    row.rn_j = wp.cross(rj, n)
-    row.inv_rn_i = inv_ii * row.rn_i
-    row.inv_rn_j = inv_ij * row.rn_j
-    inv_m = inv_mi + inv_mj
-    row.normal_mass = 1.0 / (inv_m + wp.dot(row.rn_i, row.inv_rn_i) + wp.dot(row.rn_j, row.inv_rn_j))
-    row.t1 = plane_basis_first(n)
-    row.t2 = wp.cross(n, row.t1)
-    row.rt1_i = wp.cross(ri, row.t1)
-    row.rt2_i = wp.cross(ri, row.t2)
-    row.rt1_j = wp.cross(rj, row.t1)
-    row.rt2_j = wp.cross(rj, row.t2)
-    row.inv_rt1_i = inv_ii * row.rt1_i
-    row.inv_rt2_i = inv_ii * row.rt2_i
-    row.inv_rt1_j = inv_ij * row.rt1_j
-    row.inv_rt2_j = inv_ij * row.rt2_j
-    k11 = inv_m + wp.dot(row.rt1_i, row.inv_rt1_i) + wp.dot(row.rt1_j, row.inv_rt1_j)
-    k12 = wp.dot(row.rt1_i, row.inv_rt2_i) + wp.dot(row.rt1_j, row.inv_rt2_j)
-    k22 = inv_m + wp.dot(row.rt2_i, row.inv_rt2_i) + wp.dot(row.rt2_j, row.inv_rt2_j)
-    row.tangent_k = wp.vec3(k11, k12, k22)
     return row
 
 
