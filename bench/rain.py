@@ -34,9 +34,9 @@ LIMITS = {"all_pairs": 3000, "bounding_sphere": 10000}
 
 
 def measure(count: int, broad_phase: str, contact_update: str, settle: float, steps: int, device: str,
-            sleep: bool) -> dict:
-    row = {"bodies": count, "broad_phase": broad_phase, "contact_update": contact_update, "dt": 1 / 60, "substeps": 4,
-           "sleep": sleep}
+            sleep: bool, pair_schedule: str = "auto") -> dict:
+    row = {"bodies": count, "broad_phase": broad_phase, "contact_update": contact_update,
+           "pair_schedule": pair_schedule, "dt": 1 / 60, "substeps": 4, "sleep": sleep}
     if count > LIMITS.get(broad_phase, count):
         return {**row, "steps": 0, "wall_s": "", "steps_per_s": "", "body_steps_per_s": "", "contacts": "",
                 "awake": "", "peak_penetration_m": "", "max_penetration_m": "",
@@ -44,7 +44,9 @@ def measure(count: int, broad_phase: str, contact_update: str, settle: float, st
     capacity = count * (count - 1) // 2 + 64 if broad_phase == "all_pairs" else 0
     sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase=broad_phase, device=device,
                              spacing=0.9, sleep=sleep, contact_max=capacity, rolling_resistance=0.2,
-                             contact_update=contact_update)
+                             contact_update=contact_update, pair_schedule=pair_schedule)
+    # the schedule "auto" resolved to: slabs on the CPU, colours on CUDA (solvers/domains.py)
+    row["pair_schedule"] = "domains" if sim.pairs.domain_count else "colors"
     sim.step(1)
     # the deepest penetration while the rain lands and piles (probed every 0.1 s): the accuracy
     # side of the speed / accuracy trade between the contact_update modes
@@ -73,14 +75,20 @@ def chart(rows: list[dict], path: Path, title: str):
     import matplotlib.pyplot as plt
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-    series = dict.fromkeys((r["broad_phase"], r["contact_update"]) for r in rows)
-    for bp, update in series:
-        ok = [r for r in rows if r["broad_phase"] == bp and r["contact_update"] == update and r["status"] == "ok"]
+    series = dict.fromkeys((r["broad_phase"], r["contact_update"], r["pair_schedule"]) for r in rows)
+    schedules = {r["pair_schedule"] for r in rows}
+    # one colour per (broad phase, contact update); the colour schedule dashed
+    palette = plt.get_cmap("tab10").colors
+    hues = {key: palette[k % len(palette)] for k, key in enumerate(dict.fromkeys(k[:2] for k in series))}
+    for bp, update, schedule in series:
+        ok = [r for r in rows if (r["broad_phase"], r["contact_update"], r["pair_schedule"]) == (bp, update, schedule)
+              and r["status"] == "ok"]
         if ok:
-            label = f"{bp}, contacts per {update}"
-            ax.loglog([r["bodies"] for r in ok], [r["steps_per_s"] for r in ok], marker="o", label=label)
+            label = f"{bp}, contacts per {update}" + (f", {schedule}" if len(schedules) > 1 else "")
+            style = {"color": hues[(bp, update)], "ls": "--" if schedule == "colors" else "-", "marker": "o"}
+            ax.loglog([r["bodies"] for r in ok], [r["steps_per_s"] for r in ok], label=label, **style)
             ax2.loglog([r["steps_per_s"] for r in ok], [1000 * max(r["peak_penetration_m"], 1e-6) for r in ok],
-                       marker="o", label=label)
+                       label=label, **style)
             for r in ok:
                 ax2.annotate(f"{r['bodies'] // 1000}k", (r["steps_per_s"], 1000 * max(r["peak_penetration_m"], 1e-6)),
                              fontsize=7, xytext=(3, 3), textcoords="offset points")
@@ -107,6 +115,8 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=30)
     p.add_argument("--contact-updates", nargs="+", default=["step", "substep"], choices=["step", "substep"],
                    help="find contacts once per step (default mode) and/or every substep")
+    p.add_argument("--pair-schedules", nargs="+", default=["auto"], choices=["auto", "domains", "colors"],
+                   help="how the body-body sweeps run in parallel (SimConfig.pair_schedule)")
     p.add_argument("--sleep", action="store_true")
     p.add_argument("--device", default="cpu")
     p.add_argument("--tag", default="")
@@ -118,11 +128,13 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     rows = []
-    cases_ = [(n, b, u) for n in args.counts for b in args.broad_phases for u in args.contact_updates]
-    for count, bp, update in tqdm(cases_, desc="rain", unit="case"):
-        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep)
+    cases_ = [(n, b, u, s) for n in args.counts for b in args.broad_phases for u in args.contact_updates
+              for s in args.pair_schedules]
+    for count, bp, update, schedule in tqdm(cases_, desc="rain", unit="case"):
+        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep, schedule)
         rows.append(row)
-        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['steps_per_s']!s:>9} steps/s  "
+        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['pair_schedule']:8s} "
+                   f"{row['steps_per_s']!s:>9} steps/s  "
                    f"peak depth {row['peak_penetration_m']!s:>9} m  [{row['status']}]")
     name = f"rain_{args.device.replace(':', '')}{args.tag}"
     csv_path, _ = write_rows(name, rows, meta, args.out_dir)
