@@ -3,8 +3,9 @@
 Warp runs one CPU launch on one thread.  Its launch call releases the GIL, so splitting the
 index range into chunks launched from a thread pool runs them on separate cores.  Kernels
 launched this way take ``tid_offset`` as their first argument and use ``wp.tid() + tid_offset``.
-Each index is still handled by exactly one thread, so results do not depend on the thread
-count.  Kernels launched this way must not count through shared atomics: Warp's CPU
+Each index is still handled by exactly one thread, so a launch's results do not depend on the
+thread count (the CPU pair schedule of solvers/domains.py does: it cuts the scene into one slab
+per thread).  Kernels launched this way must not count through shared atomics: Warp's CPU
 ``atomic_add`` is a plain read-modify-write, so two chunks racing on one counter lose updates
 (measured: 4M increments over 2 threads gave 3.29M).  Variable-length outputs use
 count / scan / write instead (see collide/broad_phase.py); the one shared write left is the
