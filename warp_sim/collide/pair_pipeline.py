@@ -34,7 +34,7 @@ class PairContactPipeline:
         self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
-        self.boundary_pairs = 0
+        self.schedule = None
         if domain_count > 0:
             d = domain_count
             self.body_weight = wp.zeros(n, dtype=float, device=device)
@@ -46,6 +46,8 @@ class PairContactPipeline:
             self.domain_body = wp.zeros(n, dtype=wp.int32, device=device)
             self.domain_pair_start = wp.zeros(d + 2, dtype=wp.int32, device=device)
             self.domain_pair = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
+            self.schedule = DomainSchedule(d, 0, self.domain_body_start, self.domain_body, self.domain_pair_start,
+                                           self.domain_pair)
 
     def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
@@ -83,16 +85,13 @@ class PairContactPipeline:
                 self.body_weight, self.body_domain, self.bin_weight, self.bin_domain, self.domain_cursor,
                 self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair])
             bounds = self.domain_pair_start.numpy()
-            self.boundary_pairs = int(bounds[-1] - bounds[-2])
+            self.schedule.boundary_pairs = int(bounds[-1] - bounds[-2])
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
 
     def domain_schedule(self):
         """What the solver needs to sweep by slab, or None when this pipeline only colours."""
-        if self.domain_count == 0:
-            return None
-        return DomainSchedule(self.domain_count, self.boundary_pairs, self.domain_body_start, self.domain_body,
-                              self.domain_pair_start, self.domain_pair)
+        return self.schedule
 
     def probe_depth(self, state, probe) -> float:
         """Deepest body-body penetration of ``state`` [m], found afresh (broad + narrow phase only)."""

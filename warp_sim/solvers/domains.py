@@ -51,6 +51,11 @@ def pair_domain(ij: wp.vec2i, body_domain: wp.array(dtype=wp.int32), domain_coun
     return domain_count
 
 
+@wp.func
+def bin_of(x: float, origin: float, extent: float) -> int:
+    return wp.clamp(int(float(BINS) * (x - origin) / extent), 0, BINS - 1)
+
+
 @wp.kernel
 def partition_domains(
     domain_count: int,
@@ -111,7 +116,7 @@ def partition_domains(
     total = float(0.0)
     for i in range(n):
         if body_weight[i] > 0.0:
-            b = wp.clamp(int(float(BINS) * (body_pos[i][axis] - origin) / extent), 0, BINS - 1)
+            b = bin_of(body_pos[i][axis], origin, extent)
             bin_weight[b] = bin_weight[b] + body_weight[i]
             total += body_weight[i]
     running = float(0.0)
@@ -127,7 +132,7 @@ def partition_domains(
     for i in range(n):
         d = int(-1)
         if body_weight[i] > 0.0:
-            d = bin_domain[wp.clamp(int(float(BINS) * (body_pos[i][axis] - origin) / extent), 0, BINS - 1)]
+            d = bin_domain[bin_of(body_pos[i][axis], origin, extent)]
             domain_body_start[d + 1] = domain_body_start[d + 1] + 1
         body_domain[i] = d
     for d in range(domain_count):
@@ -154,6 +159,14 @@ def partition_domains(
             d = pair_domain(pair_body[p], body_domain, domain_count)
             domain_pair[domain_cursor[d]] = p
             domain_cursor[d] = domain_cursor[d] + 1
+
+
+@wp.func
+def walk(first: int, count: int, k: int, reverse: int) -> int:
+    """The k-th index of [first, first + count), from the end when ``reverse``."""
+    if reverse != 0:
+        return first + count - 1 - k
+    return first + k
 
 
 @wp.kernel
@@ -215,28 +228,22 @@ def domain_sweep(
     body_count = domain_body_start[d + 1] - body_first
     pair_first = domain_pair_start[d]
     pair_count = domain_pair_start[d + 1] - pair_first
-    if reverse != 0:
-        # the same sweep backwards: pairs last to first, then the terrain
-        for k in range(pair_count):
-            solve_one_pair(domain_pair[pair_first + pair_count - 1 - k], mode, body_inv_mass, body_friction,
-                           body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
-                           pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
-                           pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
-                           solver_v, solver_w)
-    if terrain:
-        for k in range(body_count):
-            index = body_first + k
-            if reverse != 0:
-                index = body_first + body_count - 1 - k
-            sweep_body_terrain(domain_body[index], body_shape, body_size, body_inv_mass, body_friction,
-                               body_rolling_resistance, body_checkpoint_start, body_checkpoint_count, h, use_bias,
-                               soft, max_push_velocity, terrain_contact_active, terrain_contact_point,
-                               terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
-                               terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
-                               solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row)
-    if reverse == 0:
-        for k in range(pair_count):
-            solve_one_pair(domain_pair[pair_first + k], mode, body_inv_mass, body_friction, body_restitution, h,
-                           soft, max_push_velocity, restitution_threshold, pair_body, pair_point_count, pair_normal,
-                           pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
-                           solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)
+    # forward: terrain, then pairs; backward: the same sequence walked from its end
+    for part in range(2):
+        if (part == 0) == (reverse == 0):
+            if terrain:
+                for k in range(body_count):
+                    sweep_body_terrain(domain_body[walk(body_first, body_count, k, reverse)], body_shape, body_size,
+                                       body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start,
+                                       body_checkpoint_count, h, use_bias, soft, max_push_velocity,
+                                       terrain_contact_active, terrain_contact_point, terrain_contact_normal,
+                                       terrain_contact_depth, terrain_contact_normal_impulse,
+                                       terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos,
+                                       solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row)
+        else:
+            for k in range(pair_count):
+                solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,
+                               body_friction, body_restitution, h, soft, max_push_velocity, restitution_threshold,
+                               pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
+                               pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
+                               solver_drift_r, solver_v, solver_w)
