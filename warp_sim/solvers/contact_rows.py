@@ -130,6 +130,14 @@ def solve_terrain_row(
         impulse_scale = soft[2]
     acc = terrain_contact_normal_impulse[slot]
     vn = wp.dot(v, n) + wp.dot(w, row.rn)
+    if acc == 0.0 and vn + bias >= 0.0:
+        # An idle contact that stays idle: the normal impulse would stay 0, so the Coulomb disc
+        # has radius 0 and friction can only remove an old tangential impulse.  With none, the
+        # sweep would change nothing; stop here.  In a settled pile most box checkpoints are
+        # such speculative contacts inside the margin (20k of 30k at 10k bodies).
+        old_t = terrain_contact_tangent_impulse[slot]
+        if old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
+            return wp.spatial_vector(w, v)
     new_acc = wp.max(acc - (mass_scale * row.normal_mass) * (vn + bias) - impulse_scale * acc, 0.0)
     terrain_contact_normal_impulse[slot] = new_acc
     d = new_acc - acc
