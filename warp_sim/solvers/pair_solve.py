@@ -106,13 +106,13 @@ def solve_one_pair(
         ri = point - xi
         rj = point - xj
         acc = pair_normal_impulse[slot]
-        k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
         if mode == MODE_WARM_START:
             vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
                                      inv_ij)
         elif mode == MODE_RESTITUTION_STOP or mode == MODE_RESTITUTION_BOUNCE:
             extra = float(0.0)
             if e > 0.0:
+                k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
                 if mode == MODE_RESTITUTION_STOP:
                     extra = restitution_stop(acc, wp.dot(relative_velocity(vel, ri, rj), n), k_n)
                 else:
@@ -135,6 +135,12 @@ def solve_one_pair(
                 mass_scale = soft[1]
                 impulse_scale = soft[2]
             vn = wp.dot(relative_velocity(vel, ri, rj), n)
+            old_t = pair_tangent_impulse[slot]
+            if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
+                # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no
+                # old friction to remove; the point would change nothing (contact_rows.py)
+                continue
+            k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
             lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
             new_acc = wp.max(acc + lam, 0.0)
             pair_normal_impulse[slot] = new_acc
@@ -142,7 +148,6 @@ def solve_one_pair(
             # Friction: accumulated tangential impulse clamped to the Coulomb disc
             vr = relative_velocity(vel, ri, rj)
             vt = vr - wp.dot(vr, n) * n
-            old_t = pair_tangent_impulse[slot]
             old_t = old_t - wp.dot(old_t, n) * n
             new_t = old_t
             slip = wp.length(vt)
