@@ -147,3 +147,69 @@ def test_sphere_on_30_degree_plane_gets_exact_normal_and_depth():
     assert probe.terrain_contact_active.numpy()[0] == 1
     assert probe.terrain_contact_depth.numpy()[0] == pytest.approx(0.01, abs=1e-6)
     np.testing.assert_allclose(probe.terrain_contact_normal.numpy()[0], n, atol=1e-6)
+
+
+@pytest.mark.parametrize("terrain", TERRAINS, ids=range(len(TERRAINS)))
+def test_cubic_bound_bounds_every_third_directional_derivative(terrain):
+    """d^3/ds^3 H(p + s e) = sum A (f k . e')^3 sin(phase) exactly (e' = e scaled by 1/s.x, 1/s.z);
+    the bound used to skip box checkpoints must hold at every point and in every direction."""
+    rng = np.random.default_rng(5)
+    k = terrain.terms
+    a = terrain.amplitude_table()
+    p = terrain.phase_table()
+    m, n = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+    angle = rng.uniform(0.0, 2.0 * math.pi, 4000)
+    u = rng.uniform(-30.0, 30.0, 4000)
+    w = rng.uniform(-30.0, 30.0, 4000)
+    eu = np.cos(angle) / terrain.scale[0]
+    ew = np.sin(angle) / terrain.scale[2]
+    f = terrain.frequency
+    rate = f * (m[None] * eu[:, None, None] + n[None] * ew[:, None, None])
+    phase = f * (m[None] * u[:, None, None] + n[None] * w[:, None, None]) + p[None]
+    third = terrain.scale[1] * np.sum(a[None] * rate**3 * np.sin(phase), axis=(1, 2))
+    bound = terrain.cubic_bound()
+    assert np.abs(third).max() <= bound
+    assert np.abs(third).max() > 0.2 * bound  # and it is not vacuous
+
+
+@pytest.mark.parametrize("moving", [True, False], ids=["moving", "at_rest"])
+@pytest.mark.parametrize("terrain", TERRAINS, ids=range(len(TERRAINS)))
+def test_box_checkpoint_cull_changes_no_contact(terrain, moving):
+    """Skipping checkpoints that provably cannot reach the surface (collide/terrain_contact.py)
+    must give exactly the contacts of testing every checkpoint: boxes of random size and
+    orientation, from 0.3 reach below the surface to 1.2 reach above it.  Moving and spinning
+    with the default margin; and at rest with no margin, where the window is h^2 g and the skip
+    is decided within millimetres of the surface (a bound 2 cm too low fails this case)."""
+    rng = np.random.default_rng(6)
+    count = 300
+    b = ModelBuilder()
+    b.set_terrain(terrain)
+    xz = rng.uniform(-15.0, 15.0, size=(count, 2))
+    from warp_sim.builder import random_quaternions
+
+    quats = random_quaternions(rng, count)
+    for i in range(count):
+        half = rng.uniform(0.1, 0.6, 3)
+        reach = float(np.linalg.norm(half))
+        ground = float(terrain.height(xz[i, 0], xz[i, 1]))
+        pos = (xz[i, 0], ground + rng.uniform(-0.3, 1.2) * reach, xz[i, 1])
+        speed = 1.0 if moving else 0.0
+        b.add_box(tuple(half), 1.0, position=pos, orientation=tuple(quats[i]),
+                  velocity=tuple(speed * rng.normal(0.0, 2.0, 3)),
+                  angular_velocity=tuple(speed * rng.normal(0.0, 3.0, 3)))
+    sim = Simulator(b.finalize(), SimConfig(sleep=False))
+    results = []
+    for cull in (False, True):
+        sim.terrain_cull = cull
+        probe = sim.model.contacts()
+        if moving:
+            sim.collide(sim.state, probe, 1.0 / 60.0, 0.02)
+        else:
+            sim.collide(sim.state, probe, 1.0 / 240.0, 0.0)
+        active = probe.terrain_contact_active.numpy().astype(bool)
+        results.append((active, probe.terrain_contact_depth.numpy()[active],
+                        probe.terrain_contact_normal.numpy()[active], probe.terrain_contact_point.numpy()[active]))
+    full, culled = results
+    assert 0 < full[0].sum() < 0.6 * len(full[0])  # both kinds of slot occur
+    for a, c in zip(full, culled):
+        np.testing.assert_array_equal(a, c)

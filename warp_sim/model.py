@@ -65,6 +65,7 @@ class Model:
         self.terrain_offset = wp.vec3(*fields["terrain_offset"])
         self.terrain_plane = wp.vec4(*fields["terrain_plane"])
         self.terrain_slope_bound = float(fields["terrain_slope_bound"])
+        self.terrain_cubic_bound = float(fields["terrain_cubic_bound"])
 
     @property
     def body_mass(self) -> np.ndarray:

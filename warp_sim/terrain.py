@@ -99,6 +99,18 @@ class FourierTerrain:
         gw = float(np.sum(a * self.frequency * n)) * self.scale[1] / self.scale[2]
         return math.hypot(gu, gw)
 
+    def cubic_bound(self) -> float:
+        """An upper bound of every third directional derivative of H (unit horizontal direction e).
+
+        d^3/ds^3 of A cos(f k . (e_x / s.x, e_z / s.z) s + ...) is at most |A| (f |k . e'|)^3, and
+        |k . e'| <= sqrt(m^2 / s.x^2 + n^2 / s.z^2) (Cauchy-Schwarz); times s.y for world heights.
+        """
+        k = self.terms
+        a = np.abs(self.amplitude_table())
+        m, n = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+        reach = np.sqrt((m / self.scale[0]) ** 2 + (n / self.scale[2]) ** 2)
+        return float(np.sum(a * (self.frequency * reach) ** 3)) * abs(self.scale[1])
+
     def max_height_deviation(self) -> float:
         """sum |A| * s.y: no point of the surface lies further than this from o.y."""
         return float(np.sum(np.abs(self.amplitude_table()))) * self.scale[1]
@@ -269,6 +281,7 @@ def terrain_model_fields(terrain: Terrain) -> dict:
         "terrain_offset": (0.0, 0.0, 0.0),
         "terrain_plane": (0.0, 1.0, 0.0, 0.0),
         "terrain_slope_bound": 0.0,
+        "terrain_cubic_bound": 0.0,
     }
     if isinstance(terrain, FourierTerrain):
         out.update(
@@ -278,6 +291,7 @@ def terrain_model_fields(terrain: Terrain) -> dict:
             terrain_scale=tuple(terrain.scale),
             terrain_offset=tuple(terrain.offset),
             terrain_slope_bound=terrain.slope_bound(),
+            terrain_cubic_bound=terrain.cubic_bound(),
         )
     elif isinstance(terrain, PlaneTerrain):
         out["terrain_plane"] = (*terrain.normal, terrain.offset)

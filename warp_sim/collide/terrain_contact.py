@@ -17,9 +17,26 @@ resting sphere converges in one or two iterations.  A sphere whose vertical gap 
 sqrt(1 + G^2) (G bounds |grad H| everywhere) already exceeds r + margin cannot touch the
 surface and skips the search.
 
-Boxes: the thesis's checkpoints, one thread per checkpoint.  A checkpoint p is compared with the
+Boxes: the thesis's checkpoints.  A checkpoint p is compared with the
 surface directly below it: depth = (H(p.x, p.z) - p.y) n_y with n the unit normal from the
 gradient, the first-order distance to the surface (exact on planes).
+
+Most of a box's 26 checkpoints cannot reach the surface (those on its upper half, when it rests
+on a face), and each costs a 25-term Fourier evaluation.  One thread handles one body, samples
+the surface once under the centre c (height, gradient g, Hessian K) and skips a checkpoint p at
+horizontal offset d from c when it provably lies too high.  By Taylor's theorem with the
+Lagrange remainder, along the segment from c to c + d
+
+    H(c + d) <= H(c) + g . d + d^T K d / 2 + T |d|^3 / 6,
+
+T bounding every third directional derivative (FourierTerrain.cubic_bound).  The depth the full
+test would find is (H - p_y) n_y with n_y >= 1 / sqrt(1 + G^2), G the slope bound, so when
+p_y - (that bound) exceeds gap sqrt(1 + G^2) the slot is certainly inactive; gap uses the
+point's whole speed |v + w x r|, which is at least its approach speed.  ``CULL_SLACK`` (1 mm,
+growing 1e-7 per metre from the origin) covers the float32 error of the two evaluations, which
+is about k f |u| 2^-24 sum|A| (tests/test_terrain.py).  The skip changes no result; a test runs
+both ways and compares.  In the settled rain of 10k bodies about 8 of a box's 26 checkpoints
+are sampled, and the terrain collision pass went from 8.5 to 4.5 ms a step.
 
 Speculative margin: a slot is active while depth > -(margin + h |v_n| + h^2 |g|), the gap the
 point can close in one substep; the solver then lets it close exactly that gap (v_n >= -gap/h),
@@ -33,6 +50,8 @@ from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_norm
 from ..types import SHAPE_SPHERE
 
 NEWTON_ITERATIONS = 6
+CULL_SLACK = 1.0e-3  # [m]
+CULL_SLACK_RATE = 1.0e-7  # [m per m of |x| + |z|]
 
 
 @wp.func
@@ -89,16 +108,25 @@ def sphere_fourier_closest(
     return xz, s
 
 
+@wp.func
+def box_rise_bound(center: HeightSample, dx: float, dz: float, cubic_bound: float) -> float:
+    """An upper bound of H(c + d) - H(c) for the horizontal offset d = (dx, dz) (Taylor, see above)."""
+    quadratic = dx * dx * center.hess[0] + 2.0 * dx * dz * center.hess[1] + dz * dz * center.hess[2]
+    r = wp.sqrt(dx * dx + dz * dz)
+    return center.grad[0] * dx + center.grad[1] * dz + 0.5 * quadratic + cubic_bound * r * r * r / 6.0
+
+
 @wp.kernel
 def collide_terrain(
     tid_offset: int,
     # Model
-    checkpoint_body: wp.array(dtype=wp.int32),
-    checkpoint_local: wp.array(dtype=wp.vec3),
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
     body_inv_mass: wp.array(dtype=float),
     body_inv_inertia: wp.array(dtype=wp.vec3),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    checkpoint_local: wp.array(dtype=wp.vec3),
     terrain_kind: int,
     terrain_coef: wp.array(dtype=wp.vec2),
     terrain_terms: int,
@@ -107,10 +135,12 @@ def collide_terrain(
     terrain_offset: wp.vec3,
     terrain_plane: wp.vec4,
     terrain_slope_bound: float,
+    terrain_cubic_bound: float,
     # Settings
     h: float,
     gravity_length: float,
     speculative_margin: float,
+    cull: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
@@ -125,70 +155,89 @@ def collide_terrain(
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     terrain_contact_surface: wp.array(dtype=wp.vec2),
 ):
-    slot = wp.tid() + tid_offset
-    body = checkpoint_body[slot]
+    """One thread per body, over its slots: the body's velocity and, for a box on the Fourier
+    terrain, the surface sample under its centre are computed once and serve every checkpoint."""
+    body = wp.tid() + tid_offset
+    start = body_checkpoint_start[body]
+    count = body_checkpoint_count[body]
     x = body_pos[body]
     rot = body_rot[body]
     v = body_vel[body]
     omega = world_inv_inertia(rot, body_inv_inertia[body]) * body_angmom[body]
     is_sphere = body_shape[body] == SHAPE_SPHERE
     radius = body_size[body][0]
+    dynamic = body_inv_mass[body] > 0.0
+    fourier_box = dynamic and terrain_kind == TERRAIN_FOURIER and not is_sphere
+    gap_scale = wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
+    center = HeightSample()
+    if fourier_box and cull != 0:
+        center = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+                                x[0], x[2])
+    slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
-    depth = float(-1.0e30)
-    normal = wp.vec3(0.0, 1.0, 0.0)
-    point = x
-    if body_inv_mass[body] > 0.0:
-        if terrain_kind == TERRAIN_PLANE:
-            n = wp.vec3(terrain_plane[0], terrain_plane[1], terrain_plane[2])
-            normal = n
-            if is_sphere:
-                point = x - radius * n
-            else:
-                point = x + rot * checkpoint_local[slot]
-            depth = terrain_plane[3] - wp.dot(n, point)
-        elif terrain_kind == TERRAIN_FOURIER:
-            if is_sphere:
-                # Start from last substep's closest point when there was one, else from the
-                # point straight below, which also gives the cheap can't-reach test.
-                start = wp.vec2(x[0], x[2])
-                if terrain_contact_active[slot] != 0:
-                    start = terrain_contact_surface[slot]
-                s0 = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
-                                    start[0], start[1])
-                reach = wp.length(x - wp.vec3(start[0], s0.height, start[1]))
-                can_touch = True
-                if terrain_contact_active[slot] == 0:
-                    lower_bound = (x[1] - s0.height) / wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
-                    can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
-                if can_touch:
-                    xz, s = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                                   terrain_offset, x, start, s0, reach)
-                    surface = wp.vec3(xz[0], s.height, xz[1])
-                    if wp.length(x - surface) > reach:
-                        # the search did not improve on its starting point: use that one
-                        s = s0
-                        xz = start
-                        surface = wp.vec3(start[0], s0.height, start[1])
-                    normal = fourier_normal(s.grad)
-                    depth = radius - wp.dot(x - surface, normal)
-                    point = x - radius * normal
-                    terrain_contact_surface[slot] = xz
-            else:
-                point = x + rot * checkpoint_local[slot]
-                s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
-                                   point[0], point[2])
-                normal = fourier_normal(s.grad)
-                depth = (s.height - point[1]) * normal[1]
+    for slot in range(start, start + count):
+        depth = float(-1.0e30)
+        normal = wp.vec3(0.0, 1.0, 0.0)
+        point = x
+        if dynamic:
+            if terrain_kind == TERRAIN_PLANE:
+                n = wp.vec3(terrain_plane[0], terrain_plane[1], terrain_plane[2])
+                normal = n
+                if is_sphere:
+                    point = x - radius * n
+                else:
+                    point = x + rot * checkpoint_local[slot]
+                depth = terrain_plane[3] - wp.dot(n, point)
+            elif terrain_kind == TERRAIN_FOURIER:
+                if is_sphere:
+                    # Start from last substep's closest point when there was one, else from the
+                    # point straight below, which also gives the cheap can't-reach test.
+                    start_xz = wp.vec2(x[0], x[2])
+                    if terrain_contact_active[slot] != 0:
+                        start_xz = terrain_contact_surface[slot]
+                    s0 = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                        terrain_offset, start_xz[0], start_xz[1])
+                    reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
+                    can_touch = True
+                    if terrain_contact_active[slot] == 0:
+                        lower_bound = (x[1] - s0.height) / gap_scale
+                        can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
+                    if can_touch:
+                        xz, s = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency,
+                                                       terrain_scale, terrain_offset, x, start_xz, s0, reach)
+                        surface = wp.vec3(xz[0], s.height, xz[1])
+                        if wp.length(x - surface) > reach:
+                            # the search did not improve on its starting point: use that one
+                            s = s0
+                            xz = start_xz
+                            surface = wp.vec3(start_xz[0], s0.height, start_xz[1])
+                        normal = fourier_normal(s.grad)
+                        depth = radius - wp.dot(x - surface, normal)
+                        point = x - radius * normal
+                        terrain_contact_surface[slot] = xz
+                else:
+                    point = x + rot * checkpoint_local[slot]
+                    reachable = True
+                    if cull != 0:
+                        arm = point - x
+                        rise = box_rise_bound(center, arm[0], arm[2], terrain_cubic_bound)
+                        gap = speculative_margin + h * wp.length(v + wp.cross(omega, arm)) + h * h * gravity_length
+                        reachable = point[1] - (center.height + rise) <= gap * gap_scale + slack
+                    if reachable:
+                        s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                           terrain_offset, point[0], point[2])
+                        normal = fourier_normal(s.grad)
+                        depth = (s.height - point[1]) * normal[1]
 
-    point_vel = v + wp.cross(omega, point - x)
-    approach = wp.max(-wp.dot(point_vel, normal), 0.0)
-    gap_closable = speculative_margin + h * approach + h * h * gravity_length
-    if depth > -gap_closable:
-        terrain_contact_active[slot] = 1
-        terrain_contact_point[slot] = point
-        terrain_contact_normal[slot] = normal
-        terrain_contact_depth[slot] = depth
-    else:
-        terrain_contact_active[slot] = 0
-        terrain_contact_normal_impulse[slot] = 0.0
-        terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+        point_vel = v + wp.cross(omega, point - x)
+        approach = wp.max(-wp.dot(point_vel, normal), 0.0)
+        gap_closable = speculative_margin + h * approach + h * h * gravity_length
+        if depth > -gap_closable:
+            terrain_contact_active[slot] = 1
+            terrain_contact_point[slot] = point
+            terrain_contact_normal[slot] = normal
+            terrain_contact_depth[slot] = depth
+        else:
+            terrain_contact_active[slot] = 0
+            terrain_contact_normal_impulse[slot] = 0.0
+            terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
