@@ -31,8 +31,15 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.struct
 class TerrainRow:
-    """One terrain contact's rows for the current substep (body side only: the terrain is static)."""
+    """One terrain contact's rows for the current substep (body side only: the terrain is static).
 
+    A body's rows are packed at the front of its slot range, active contacts only, in slot order,
+    so a sweep reads one contiguous record per contact and never visits an idle slot."""
+
+    slot: wp.int32  # where the accumulated impulses live
+    normal: wp.vec3
+    arm: wp.vec3  # r = p - x_ref
+    depth: float
     rn: wp.vec3  # r x n
     inv_rn: wp.vec3  # I^-1 (r x n)
     normal_mass: float  # 1 / k_n
@@ -58,8 +65,13 @@ def plane_basis_first(n: wp.vec3) -> wp.vec3:
 
 
 @wp.func
-def make_terrain_row(arm: wp.vec3, n: wp.vec3, inv_mass: float, inv_inertia: wp.mat33) -> TerrainRow:
+def make_terrain_row(slot: int, arm: wp.vec3, n: wp.vec3, depth: float, inv_mass: float,
+                     inv_inertia: wp.mat33) -> TerrainRow:
     row = TerrainRow()
+    row.slot = slot
+    row.normal = n
+    row.arm = arm
+    row.depth = depth
     row.rn = wp.cross(arm, n)
     row.inv_rn = inv_inertia * row.rn
     row.normal_mass = 1.0 / (inv_mass + wp.dot(row.rn, row.inv_rn))
@@ -103,7 +115,6 @@ def friction_step(vt1: float, vt2: float, old_t: wp.vec3, t1: wp.vec3, t2: wp.ve
 @wp.func
 def solve_terrain_row(
     row: TerrainRow,
-    n: wp.vec3,
     separation: float,
     v: wp.vec3,
     w: wp.vec3,
@@ -113,12 +124,13 @@ def solve_terrain_row(
     use_bias: int,
     soft: wp.vec3,
     max_push_velocity: float,
-    slot: int,
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
 ) -> wp.spatial_vector:
     """One sweep over one terrain contact: the normal row (soft_step.py gives the soft-constraint
     algebra), then the friction block.  Returns the new (w, v) as a spatial vector."""
+    n = row.normal
+    slot = row.slot
     bias = float(0.0)
     mass_scale = float(1.0)
     impulse_scale = float(0.0)

@@ -188,17 +188,12 @@ def domain_sweep(
     body_restitution: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
     h: float,
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     pair_body: wp.array(dtype=wp.vec2i),
@@ -217,6 +212,7 @@ def domain_sweep(
     solver_w: wp.array(dtype=wp.vec3),
     solver_rolling: wp.array(dtype=wp.vec3),
     terrain_row: wp.array(dtype=TerrainRow),
+    terrain_row_count: wp.array(dtype=wp.int32),
 ):
     """One sweep of one slab (d < domain_count: its bodies' terrain contacts, then its pairs) or of
     the boundary pairs (d == domain_count), in the pair_solve mode ``mode``; ``reverse`` walks
@@ -235,11 +231,10 @@ def domain_sweep(
                 for k in range(body_count):
                     sweep_body_terrain(domain_body[walk(body_first, body_count, k, reverse)], body_shape, body_size,
                                        body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start,
-                                       body_checkpoint_count, h, use_bias, soft, max_push_velocity,
-                                       terrain_contact_active, terrain_contact_point, terrain_contact_normal,
-                                       terrain_contact_depth, terrain_contact_normal_impulse,
+                                       h, use_bias, soft, max_push_velocity, terrain_contact_normal_impulse,
                                        terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos,
-                                       solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row)
+                                       solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row,
+                                       terrain_row_count)
         else:
             for k in range(pair_count):
                 solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,

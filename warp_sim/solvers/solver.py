@@ -89,22 +89,26 @@ class SoftStepSolver:
             self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
                               fresh_contacts, domains)
 
-    def _terrain_rows(self, contacts):
+    def _terrain_rows(self, model, contacts):
+        """Row storage (one per slot, packed per body; contact_rows.py) and each body's row count."""
         rows = getattr(self, "terrain_row", None)
         if rows is None or rows.shape[0] < contacts.terrain_contact_active.shape[0]:
             self.terrain_row = wp.zeros(contacts.terrain_contact_active.shape[0], dtype=TerrainRow, device=self.device)
-        return self.terrain_row
+        counts = getattr(self, "terrain_row_count", None)
+        if counts is None or counts.shape[0] < model.body_count:
+            self.terrain_row_count = wp.zeros(max(model.body_count, 1), dtype=wp.int32, device=self.device)
+        return self.terrain_row, self.terrain_row_count
 
     def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
             self.gravity, dt, integrator, int(fresh_contacts), int(make_rows),
             state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
             c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0,
             self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r,
-            self._terrain_rows(c)], device=self.device)
+            *self._terrain_rows(m, c)], device=self.device)
 
     def _integrate_positions(self, m, state_in, state_out, dt, integrator):
         launch(integrate_positions, m.body_count, key=self, inputs=[
@@ -158,12 +162,12 @@ class SoftStepSolver:
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[
                 m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_rolling_resistance,
-                m.body_checkpoint_start, m.body_checkpoint_count,
+                m.body_checkpoint_start,
                 dt, use_bias, soft, s.max_push_velocity,
-                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
                 c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
                 self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row], device=dev)
+                self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count],
+                device=dev)
 
         def pairs(mode: int):
             for color, size in enumerate(color_sizes):
@@ -184,14 +188,13 @@ class SoftStepSolver:
             g = domains
             args = [g.domain_count, mode, reverse, g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair,
                     m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_restitution,
-                    m.body_rolling_resistance, m.body_checkpoint_start, m.body_checkpoint_count,
+                    m.body_rolling_resistance, m.body_checkpoint_start,
                     dt, soft, s.max_push_velocity, s.restitution_threshold,
-                    c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-                    c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                    c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
                     c.pair_normal_impulse, c.pair_tangent_impulse,
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                    self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row]
+                    self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count]
             launch(domain_sweep, g.domain_count, [0, *args], dev, key=self, min_chunk=1)
             if g.boundary_pairs:
                 launch(domain_sweep, 1, [g.domain_count, *args], dev, key=self)

@@ -67,6 +67,7 @@ def prepare_bodies(
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
     terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     # Out
@@ -80,9 +81,11 @@ def prepare_bodies(
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
     terrain_row: wp.array(dtype=TerrainRow),
+    terrain_row_count: wp.array(dtype=wp.int32),
 ):
     i = wp.tid() + tid_offset
     solver_rolling[i] = wp.vec3(0.0)
+    terrain_row_count[i] = 0
     if reset_reference != 0:
         # the contacts were just found at this pose: anchors are measured from it
         solver_ref_pos[i] = body_pos[i]
@@ -105,10 +108,14 @@ def prepare_bodies(
     start = body_checkpoint_start[i]
     count = body_checkpoint_count[i]
     if make_rows != 0:
+        rows = int(0)
         for slot in range(start, start + count):
             if terrain_contact_active[slot] != 0:
-                terrain_row[slot] = make_terrain_row(terrain_contact_point[slot] - x_ref, terrain_contact_normal[slot],
-                                                     inv_mass, inv_inertia)
+                terrain_row[start + rows] = make_terrain_row(slot, terrain_contact_point[slot] - x_ref,
+                                                             terrain_contact_normal[slot],
+                                                             terrain_contact_depth[slot], inv_mass, inv_inertia)
+                rows += 1
+        terrain_row_count[i] = rows
     vel = warm_start_terrain(start, count, x_ref, vel, inv_mass,
                              inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
                              terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
@@ -127,17 +134,12 @@ def sweep_body_terrain(
     body_friction: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
     h: float,
     use_bias: int,
     soft: wp.vec3,
     max_push_velocity: float,
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     # Solver in/out
@@ -149,9 +151,10 @@ def sweep_body_terrain(
     solver_w: wp.array(dtype=wp.vec3),
     solver_rolling: wp.array(dtype=wp.vec3),
     terrain_row: wp.array(dtype=TerrainRow),
+    terrain_row_count: wp.array(dtype=wp.int32),
 ):
-    """One terrain sweep of body i over its active slots, with the rows built by prepare_bodies."""
-    count = body_checkpoint_count[i]
+    """One terrain sweep of body i over its active contacts, with the rows built by prepare_bodies."""
+    count = terrain_row_count[i]
     inv_mass = body_inv_mass[i]
     if inv_mass == 0.0 or count == 0:
         return
@@ -166,25 +169,23 @@ def sweep_body_terrain(
     w = solver_w[i]
     rolling_impulse = solver_rolling[i]
     start = body_checkpoint_start[i]
-    for slot in range(start, start + count):
-        if terrain_contact_active[slot] != 0:
-            n = terrain_contact_normal[slot]
-            # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
-            arm = terrain_contact_point[slot] - x_ref
-            separation = -terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
-            vw = solve_terrain_row(terrain_row[slot], n, separation, v, w, inv_mass, friction, h, use_bias, soft,
-                                   max_push_velocity, slot, terrain_contact_normal_impulse,
-                                   terrain_contact_tangent_impulse)
-            w = wp.spatial_top(vw)
-            v = wp.spatial_bottom(vw)
-            if rolling > 0.0:
-                vel = BodyVelocity()
-                vel.v = v
-                vel.w = w
-                vel.rolling_impulse = rolling_impulse
-                vel = solve_rolling(vel, n, solver_inv_inertia[i], rolling * terrain_contact_normal_impulse[slot])
-                w = vel.w
-                rolling_impulse = vel.rolling_impulse
+    for k in range(count):
+        row = terrain_row[start + k]
+        # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
+        separation = -row.depth + wp.dot(drift_p + drift_r * row.arm, row.normal)
+        vw = solve_terrain_row(row, separation, v, w, inv_mass, friction, h, use_bias, soft, max_push_velocity,
+                               terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
+        w = wp.spatial_top(vw)
+        v = wp.spatial_bottom(vw)
+        if rolling > 0.0:
+            vel = BodyVelocity()
+            vel.v = v
+            vel.w = w
+            vel.rolling_impulse = rolling_impulse
+            vel = solve_rolling(vel, row.normal, solver_inv_inertia[i],
+                                rolling * terrain_contact_normal_impulse[row.slot])
+            w = vel.w
+            rolling_impulse = vel.rolling_impulse
     solver_v[i] = v
     solver_w[i] = w
     solver_rolling[i] = rolling_impulse
@@ -200,17 +201,12 @@ def terrain_sweep(
     body_friction: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
     h: float,
     use_bias: int,
     soft: wp.vec3,
     max_push_velocity: float,
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     # Solver in/out
@@ -222,8 +218,13 @@ def terrain_sweep(
     solver_w: wp.array(dtype=wp.vec3),
     solver_rolling: wp.array(dtype=wp.vec3),
     terrain_row: wp.array(dtype=TerrainRow),
+    terrain_row_count: wp.array(dtype=wp.int32),
 ):
-    sweep_body_terrain(wp.tid() + tid_offset, body_shape, body_size, body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start, body_checkpoint_count, h, use_bias, soft, max_push_velocity, terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse, terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row)
+    sweep_body_terrain(wp.tid() + tid_offset, body_shape, body_size, body_inv_mass, body_friction,
+                       body_rolling_resistance, body_checkpoint_start, h, use_bias, soft, max_push_velocity,
+                       terrain_contact_normal_impulse, terrain_contact_tangent_impulse, solver_inv_inertia,
+                       solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling,
+                       terrain_row, terrain_row_count)
 
 
 @wp.kernel
