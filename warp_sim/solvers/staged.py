@@ -37,7 +37,8 @@ import warp as wp
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
 from .contact_rows import TerrainRow, make_terrain_row, solve_terrain_row
-from .soft_step import BodyVelocity, drift_rotation, restitution_pass, solve_rolling, warm_start_terrain
+from .soft_step import (BodyVelocity, apply_impulse, drift_rotation, restitution_pass, solve_rolling,
+                        warm_start_terrain)
 
 wp.set_module_options({"enable_backward": False})
 
@@ -108,17 +109,23 @@ def prepare_bodies(
     start = body_checkpoint_start[i]
     count = body_checkpoint_count[i]
     if make_rows != 0:
+        # rows and warm start in one pass over the slots (the same impulses, in the same order,
+        # as warm_start_terrain)
         rows = int(0)
         for slot in range(start, start + count):
             if terrain_contact_active[slot] != 0:
-                terrain_row[start + rows] = make_terrain_row(slot, terrain_contact_point[slot] - x_ref,
-                                                             terrain_contact_normal[slot],
-                                                             terrain_contact_depth[slot], inv_mass, inv_inertia)
+                arm = terrain_contact_point[slot] - x_ref
+                n = terrain_contact_normal[slot]
+                terrain_row[start + rows] = make_terrain_row(slot, arm, n, terrain_contact_depth[slot], inv_mass,
+                                                             inv_inertia)
                 rows += 1
+                warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
+                vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
         terrain_row_count[i] = rows
-    vel = warm_start_terrain(start, count, x_ref, vel, inv_mass,
-                             inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
-                             terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
+    else:
+        vel = warm_start_terrain(start, count, x_ref, vel, inv_mass,
+                                 inv_inertia, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
+                                 terrain_contact_normal_impulse, terrain_contact_tangent_impulse)
     solver_v[i] = vel.v
     solver_w[i] = vel.w
     solver_inv_inertia[i] = inv_inertia
