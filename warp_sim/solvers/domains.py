@@ -30,7 +30,7 @@ valid, Gauss-Seidel order.
 import warp as wp
 
 from .contact_rows import TerrainRow
-from .pair_solve import MODE_RELAX, MODE_SOLVE, solve_one_pair
+from .pair_solve import MODE_RELAX, MODE_SOLVE, MODE_WARM_START, solve_one_pair
 from .staged import sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
@@ -176,6 +176,7 @@ def domain_sweep(
     domain_count: int,
     mode: int,
     reverse: int,
+    warm_start: int,
     domain_body_start: wp.array(dtype=wp.int32),
     domain_body: wp.array(dtype=wp.int32),
     domain_pair_start: wp.array(dtype=wp.int32),
@@ -224,6 +225,15 @@ def domain_sweep(
     body_count = domain_body_start[d + 1] - body_first
     pair_first = domain_pair_start[d]
     pair_count = domain_pair_start[d + 1] - pair_first
+    if warm_start != 0:
+        # the pairs' warm start rides on the first sweep's launch: a launch split over the
+        # cores costs ~90 us of thread hand-off (launch.py), four of them a step
+        for k in range(pair_count):
+            solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
+                           body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
+                           pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
+                           solver_v, solver_w)
     # forward: terrain, then pairs; backward: the same sequence walked from its end
     for part in range(2):
         if (part == 0) == (reverse == 0):
