@@ -20,6 +20,11 @@ from .broad_phase import (
     spheres_overlap,
 )
 
+# The sorted grid's rows are counted and placed in two passes over the neighbour cells; the
+# first keeps up to ROW_STASH pairs a body so the second can copy them (rows are short: 0.7
+# pairs a body in a settled rain of 10k).  The stash costs 8 bytes x ROW_STASH a body.
+ROW_STASH = 8
+
 # Grids: cells, bounds and table layout ----------------------------------------------------------
 
 
@@ -217,6 +222,52 @@ def grid_scan_run(
     return n
 
 
+@wp.func
+def grid_sorted_row(
+    s: int,
+    margin: float,
+    layout: wp.vec3i,
+    bucket_first: wp.array(dtype=wp.int32),
+    cell_body: wp.array(dtype=wp.int32),
+    sorted_pos: wp.array(dtype=wp.vec3),
+    sorted_radius: wp.array(dtype=float),
+    sorted_static: wp.array(dtype=wp.int32),
+    sorted_cell: wp.array(dtype=wp.vec3i),
+    emit: int,
+    start: wp.int64,
+    limit: int,
+    out: wp.array(dtype=wp.vec2i),
+) -> int:
+    """Row of the body at sorted index s: its pairs (i, j > i), written from out[start] (below
+    index ``limit``) when ``emit``; returns how many there are.
+
+    The 27 neighbour cells are 9 runs of three cells along x; unless the run wraps around the
+    table they are three consecutive buckets, i.e. one contiguous range of sorted bodies."""
+    i = cell_body[s]
+    x_i = sorted_pos[s]
+    r_i = sorted_radius[s]
+    static_i = sorted_static[s]
+    c = sorted_cell[s]
+    count = int(0)
+    for dz in range(-1, 2):
+        for dy in range(-1, 2):
+            y = c[1] + dy
+            z = c[2] + dz
+            b_lo = cell_bucket(wp.vec3i(c[0] - 1, y, z), layout)
+            b_hi = cell_bucket(wp.vec3i(c[0] + 1, y, z), layout)
+            if b_hi == b_lo + 2:
+                count = grid_scan_run(bucket_first[b_lo], bucket_first[b_hi + 1], c[0] - 1, c[0] + 1, y, z,
+                                      i, x_i, r_i, static_i, margin, cell_body, sorted_pos, sorted_radius,
+                                      sorted_static, sorted_cell, emit, start, count, limit, out)
+            else:
+                for dx in range(-1, 2):
+                    b = cell_bucket(wp.vec3i(c[0] + dx, y, z), layout)
+                    count = grid_scan_run(bucket_first[b], bucket_first[b + 1], c[0] + dx, c[0] + dx, y, z,
+                                          i, x_i, r_i, static_i, margin, cell_body, sorted_pos, sorted_radius,
+                                          sorted_static, sorted_cell, emit, start, count, limit, out)
+    return count
+
+
 @wp.kernel
 def grid_sorted_rows(
     tid_offset: int,
@@ -229,47 +280,57 @@ def grid_sorted_rows(
     sorted_radius: wp.array(dtype=float),
     sorted_static: wp.array(dtype=wp.int32),
     sorted_cell: wp.array(dtype=wp.vec3i),
-    emit: int,
+    stash: int,
+    # Out
+    row_count: wp.array(dtype=wp.int64),
+    row_stash: wp.array(dtype=wp.vec2i),
+):
+    """One thread per body in bucket order: counts row i and keeps its first ``stash`` pairs in
+    row_stash[s * stash:], so grid_sorted_place can usually copy instead of scanning again."""
+    s = wp.tid() + tid_offset
+    first = wp.int64(s) * wp.int64(stash)
+    count = grid_sorted_row(s, margin, table_layout[0], bucket_first, cell_body, sorted_pos, sorted_radius,
+                            sorted_static, sorted_cell, 1, first, int(first) + stash, row_stash)
+    row_count[cell_body[s]] = wp.int64(count)
+
+
+@wp.kernel
+def grid_sorted_place(
+    tid_offset: int,
+    # In
+    margin: float,
+    table_layout: wp.array(dtype=wp.vec3i),
+    bucket_first: wp.array(dtype=wp.int32),
+    cell_body: wp.array(dtype=wp.int32),
+    sorted_pos: wp.array(dtype=wp.vec3),
+    sorted_radius: wp.array(dtype=float),
+    sorted_static: wp.array(dtype=wp.int32),
+    sorted_cell: wp.array(dtype=wp.vec3i),
+    stash: int,
+    row_stash: wp.array(dtype=wp.vec2i),
+    row_count: wp.array(dtype=wp.int64),
     row_start: wp.array(dtype=wp.int64),
     capacity: int,
     # Out
-    row_count: wp.array(dtype=wp.int64),
     pair_body: wp.array(dtype=wp.vec2i),
 ):
-    """One thread per body in bucket order; emit = 0 counts row i, emit = 1 writes and sorts it.
-
-    The 27 neighbour cells are 9 runs of three cells along x; unless the run wraps around the
-    table they are three consecutive buckets, i.e. one contiguous range of sorted bodies."""
+    """Row i into its place from row_start[i], sorted by j: copied from the stash when it fit
+    there, else scanned again (the same scan, so the same pairs)."""
     s = wp.tid() + tid_offset
     i = cell_body[s]
-    x_i = sorted_pos[s]
-    r_i = sorted_radius[s]
-    static_i = sorted_static[s]
-    c = sorted_cell[s]
-    layout = table_layout[0]
-    start = wp.int64(0)
-    if emit != 0:
-        start = row_start[i]
-    count = int(0)
-    for dz in range(-1, 2):
-        for dy in range(-1, 2):
-            y = c[1] + dy
-            z = c[2] + dz
-            b_lo = cell_bucket(wp.vec3i(c[0] - 1, y, z), layout)
-            b_hi = cell_bucket(wp.vec3i(c[0] + 1, y, z), layout)
-            if b_hi == b_lo + 2:
-                count = grid_scan_run(bucket_first[b_lo], bucket_first[b_hi + 1], c[0] - 1, c[0] + 1, y, z,
-                                      i, x_i, r_i, static_i, margin, cell_body, sorted_pos, sorted_radius,
-                                      sorted_static, sorted_cell, emit, start, count, capacity, pair_body)
-            else:
-                for dx in range(-1, 2):
-                    b = cell_bucket(wp.vec3i(c[0] + dx, y, z), layout)
-                    count = grid_scan_run(bucket_first[b], bucket_first[b + 1], c[0] + dx, c[0] + dx, y, z,
-                                          i, x_i, r_i, static_i, margin, cell_body, sorted_pos, sorted_radius,
-                                          sorted_static, sorted_cell, emit, start, count, capacity, pair_body)
-    if emit == 0:
-        row_count[i] = wp.int64(count)
-    elif count > 1 and start < wp.int64(capacity):
+    start = row_start[i]
+    count = int(row_count[i])
+    if start >= wp.int64(capacity) or count == 0:
+        return
+    if count <= stash:
+        first = s * stash
+        for k in range(count):
+            if start + wp.int64(k) < wp.int64(capacity):
+                pair_body[int(start) + k] = row_stash[first + k]
+    else:
+        grid_sorted_row(s, margin, table_layout[0], bucket_first, cell_body, sorted_pos, sorted_radius,
+                        sorted_static, sorted_cell, 1, start, capacity, pair_body)
+    if count > 1:
         end = wp.min(start + wp.int64(count), wp.int64(capacity))
         sort_row(pair_body, wp.int32(start), wp.int32(end - start))
 
@@ -363,14 +424,16 @@ class SortedGridBroadPhase(GridBroadPhase):
         self.sorted_radius = wp.zeros(n, dtype=float, device=self.device)
         self.sorted_static = wp.zeros(n, dtype=wp.int32, device=self.device)
         self.sorted_cell = wp.zeros(n, dtype=wp.vec3i, device=self.device)
+        self.row_stash = wp.zeros(n * ROW_STASH, dtype=wp.vec2i, device=self.device)
 
-    def _rows(self, n, margin, emit):
-        launch(grid_sorted_rows, dim=n, device=self.device, inputs=[
-            margin, self.table_layout, self.bucket_first, self.cell_body,  # In
-            self.sorted_pos, self.sorted_radius, self.sorted_static, self.sorted_cell,
-            emit, self.row_start, self.capacity,
-            self.row_count, self.pair_body,  # Out
-        ])
+    def _rows(self, n, margin):
+        """Count every row, stashing its first ROW_STASH pairs; scan; then place the rows."""
+        grid = [margin, self.table_layout, self.bucket_first, self.cell_body,
+                self.sorted_pos, self.sorted_radius, self.sorted_static, self.sorted_cell, ROW_STASH]
+        launch(grid_sorted_rows, dim=n, device=self.device, inputs=[*grid, self.row_count, self.row_stash])
+        self._scan_rows(n)
+        launch(grid_sorted_place, dim=n, device=self.device, inputs=[
+            *grid, self.row_stash, self.row_count, self.row_start, self.capacity, self.pair_body])
 
     def _find_rows(self, n, positions, radii, margin):
         self._cells(n, positions, 1.0 / self.cell_width(radii, margin))
@@ -385,9 +448,7 @@ class SortedGridBroadPhase(GridBroadPhase):
             n, self.table_size, self.body_cell, self.cell_key, self.cell_body,  # In
             self.bucket_first, self.sorted_pos, self.sorted_radius, self.sorted_static, self.sorted_cell,  # Out
         ])
-        self._rows(n, margin, 0)
-        self._scan_rows(n)
-        self._rows(n, margin, 1)
+        self._rows(n, margin)
 
 
 class HashGridBroadPhase(GridBroadPhase):
