@@ -29,6 +29,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import warp as wp
 
+LIGHT_CHUNK = 1 << 16  # for kernels of a few loads and stores a thread (cell keys, flags): at
+#                        10k bodies one such launch ran 0.2 ms split in two, nearly all hand-off
 MIN_CHUNK = 4096  # below this a chunk costs more in thread hand-off than it saves (rain of 1k bodies:
 #                   43 steps/s on one thread, 38 split in two; 10k: 5.3 on one, 8.1 split)
 

@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..launch import launch
+from ..launch import LIGHT_CHUNK, launch
 
 # Pairs per row above which the grids sort a row by heapsort instead of insertion sort.
 INSERTION_SORT_MAX = 32
@@ -342,7 +342,8 @@ class BroadPhase:
         if inv_mass is None:
             self.body_static.zero_()
         else:
-            launch(mark_static, dim=n, inputs=[inv_mass, self.body_static], device=self.device)
+            launch(mark_static, dim=n, inputs=[inv_mass, self.body_static], device=self.device,
+                   min_chunk=LIGHT_CHUNK)
         self._find_rows(n, positions, radii, float(margin))
         wp.launch(finish_pair_count, dim=1, device=self.device,
                   inputs=[n, self.row_count, self.row_start, self.capacity, self.pair_demand, self.pair_count])

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import warp as wp
 
-from ..launch import launch
+from ..launch import LIGHT_CHUNK, launch
 from .broad_phase import (
     BroadPhase,
     CELL_SLACK,
@@ -403,7 +403,8 @@ class GridBroadPhase(BroadPhase):
         self.table_layout = wp.zeros(1, dtype=wp.vec3i, device=self.device)
 
     def _cells(self, n, positions, inv_cell):
-        launch(grid_cells, dim=n, device=self.device, inputs=[positions, inv_cell, self.body_cell])
+        launch(grid_cells, dim=n, device=self.device, inputs=[positions, inv_cell, self.body_cell],
+               min_chunk=LIGHT_CHUNK)
         wp.copy(self.cell_bounds, self._bounds_empty)
         wp.launch(grid_cell_bounds, dim=n, device=self.device, inputs=[self.body_cell, self.cell_bounds])
 
@@ -439,10 +440,10 @@ class SortedGridBroadPhase(GridBroadPhase):
         self._cells(n, positions, 1.0 / self.cell_width(radii, margin))
         wp.launch(grid_table_layout, dim=1, device=self.device,
                   inputs=[self.table_bits, self.cell_bounds, self.table_layout])
-        launch(grid_bucket_keys, dim=n, device=self.device,
+        launch(grid_bucket_keys, dim=n, device=self.device, min_chunk=LIGHT_CHUNK,
                inputs=[self.body_cell, self.table_layout, self.cell_key, self.cell_body])
         wp.utils.radix_sort_pairs(self.cell_key, self.cell_body, n, 0, self.table_bits)
-        launch(grid_bucket_ranges, dim=n, device=self.device, inputs=[
+        launch(grid_bucket_ranges, dim=n, device=self.device, min_chunk=LIGHT_CHUNK, inputs=[
             radii, self.body_static,  # Model
             positions,  # State in
             n, self.table_size, self.body_cell, self.cell_key, self.cell_body,  # In

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from ..launch import launch
+from ..launch import LIGHT_CHUNK, launch
 from ..solvers.coloring import COLOR_COUNT, color_pairs
 from ..solvers.domains import BINS, partition_domains
 from .broad_phase import make_broad_phase
@@ -57,7 +57,7 @@ class PairContactPipeline:
         per step still covers contacts made late in the step.
         """
         m = self.model
-        launch(swept_reach, m.body_count, key=self, inputs=[
+        launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
             m.body_bound_radius, m.body_inv_inertia, float(sweep_time),
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
         self.broad.invalidate_radii()  # the grid cell follows the largest swept radius

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import warp as wp
 
-from ..launch import launch
+from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
@@ -242,7 +242,7 @@ class SoftStepSolver:
                 slabs(mode)
             else:
                 pairs(mode)
-        launch(finalize_bodies, n, key=self, inputs=[
+        launch(finalize_bodies, n, key=self, min_chunk=LIGHT_CHUNK, inputs=[
             m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
             state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             self.solver_v, self.solver_w, self.solver_w0,
