@@ -8,6 +8,7 @@ import pytest
 import warp as wp
 
 from warp_sim import FourierTerrain, ModelBuilder, PlaneTerrain, SimConfig, Simulator
+from warp_sim.builder import random_quaternions
 from warp_sim.terrain import fourier_sample, terrain_model_fields
 
 TERRAINS = [
@@ -185,8 +186,6 @@ def test_box_checkpoint_cull_changes_no_contact(terrain, moving):
     b = ModelBuilder()
     b.set_terrain(terrain)
     xz = rng.uniform(-15.0, 15.0, size=(count, 2))
-    from warp_sim.builder import random_quaternions
-
     quats = random_quaternions(rng, count)
     for i in range(count):
         half = rng.uniform(0.1, 0.6, 3)
