@@ -187,24 +187,27 @@ class SoftStepSolver:
             """Terrain (solve and relax modes) and pairs of every slab at once, then the boundary pairs;
             ``warm_start`` first re-applies the pairs' impulses (each slab's, then the boundary's)."""
             g = domains
-            args = [g.domain_count, mode, reverse, 0, g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair,
-                    m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_restitution,
-                    m.body_rolling_resistance, m.body_checkpoint_start,
-                    dt, soft, s.max_push_velocity, s.restitution_threshold,
-                    c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                    c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
-                    c.pair_normal_impulse, c.pair_tangent_impulse,
-                    self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                    self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count]
+            shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair,
+                      m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_restitution,
+                      m.body_rolling_resistance, m.body_checkpoint_start,
+                      dt, soft, s.max_push_velocity, s.restitution_threshold,
+                      c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                      c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
+                      c.pair_normal_impulse, c.pair_tangent_impulse,
+                      self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+                      self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count]
+
+            def sweep(first_domain: int, count: int, sweep_mode: int, warm: int):
+                launch(domain_sweep, count, [first_domain, g.domain_count, sweep_mode, reverse, warm, *shared], dev,
+                       key=self, min_chunk=1)
+
             if warm_start and g.boundary_pairs:
                 # before any slab solves: a boundary pair's impulse applied after them was measured to
                 # let a 10-box stack split across two slabs sag 27 mm instead of 7
-                launch(domain_sweep, 1, [g.domain_count, *args[:1], MODE_WARM_START, *args[2:]], dev, key=self)
-            args[3] = warm_start
-            launch(domain_sweep, g.domain_count, [0, *args], dev, key=self, min_chunk=1)
+                sweep(g.domain_count, 1, MODE_WARM_START, 0)
+            sweep(0, g.domain_count, mode, warm_start)
             if g.boundary_pairs:
-                args[3] = 0
-                launch(domain_sweep, 1, [g.domain_count, *args], dev, key=self)
+                sweep(g.domain_count, 1, mode, 0)
 
         if domains is not None:
             # Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the
