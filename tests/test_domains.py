@@ -5,7 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from warp_sim import cases
+from warp_sim import ModelBuilder, PlaneTerrain, SimConfig, Simulator, cases
+from warp_sim.builder import Material
 
 DOMAINS = 3  # more slabs than this machine may have cores: the schedule must not depend on them
 
@@ -26,8 +27,9 @@ def partition(sim):
 
 def test_every_dynamic_body_is_in_exactly_one_slab(rain):
     body_start, body_list, _, _, body_domain = partition(rain)
-    assert body_start[0] == 0 and body_start[-1] == rain.model.body_count  # all bodies are dynamic here
-    listed = body_list[: body_start[-1]]
+    # all bodies are dynamic here: the static list after the slabs is empty
+    assert body_start[0] == 0 and body_start[DOMAINS] == body_start[-1] == rain.model.body_count
+    listed = body_list[: body_start[DOMAINS]]
     assert np.array_equal(np.sort(listed), np.arange(rain.model.body_count))
     for d in range(DOMAINS):
         members = body_list[body_start[d]:body_start[d + 1]]
@@ -89,3 +91,45 @@ def test_slab_schedule_is_deterministic(monkeypatch):
         sim.step(30)
         runs.append(sim.state.body_pos.numpy().tobytes() + sim.state.body_vel.numpy().tobytes())
     assert runs[0] == runs[1]
+
+
+def test_boundary_bodies_are_listed_once_each(rain):
+    """The dynamic bodies of boundary pairs are integrated and finalized by the boundary thread
+    (solvers/domains.py), so the list must hold each of them exactly once, and no other body."""
+    _, _, pair_start, pair_list, body_domain = partition(rain)
+    p = rain.pairs
+    bodies = rain.contacts.pair_body.numpy()
+    boundary = pair_list[pair_start[DOMAINS]:pair_start[DOMAINS + 1]]
+    assert len(boundary) > 0  # the scene must exercise the boundary
+    expected = {int(b) for pair in boundary for b in bodies[pair] if body_domain[b] >= 0}
+    listed = p.boundary_body.numpy()[: int(p.boundary_body_count.numpy()[0])]
+    assert len(listed) == len(set(listed.tolist())) and set(listed.tolist()) == expected
+    assert set(np.nonzero(p.body_on_boundary.numpy())[0].tolist()) == expected
+
+
+def test_static_bodies_are_listed_after_the_slabs_and_stay_put(monkeypatch):
+    """Static bodies belong to no slab; one thread copies them each substep.  Balls and boxes
+    dropped into a pit of static walls stay inside, and the walls do not move at all."""
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", str(DOMAINS))
+    b = ModelBuilder(Material(friction=0.5, rolling_resistance=0.2))
+    b.set_terrain(PlaneTerrain())
+    for x, z, hx, hz in ((-2.6, 0, 0.1, 1.0), (2.6, 0, 0.1, 1.0), (0, -1.1, 2.7, 0.1), (0, 1.1, 2.7, 0.1)):
+        b.add_box((hx, 0.5, hz), 1.0, position=(x, 0.5, z), static=True)
+    for k in range(12):
+        position = (-2.2 + 0.4 * k, 1.0 + 0.3 * k, 0.3 * (-1) ** k)
+        if k % 2:
+            b.add_box((0.15, 0.15, 0.15), 1.0, position=position)
+        else:
+            b.add_sphere(0.2, 1.0, position=position)
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False))
+    walls = np.nonzero(sim.model.host["body_inv_mass"] == 0)[0]
+    start_pos = sim.state.body_pos.numpy()[walls].copy()
+    sim.step(120)
+    body_start, body_list, _, _, body_domain = partition(sim)
+    assert np.array_equal(np.sort(body_list[body_start[DOMAINS]:body_start[DOMAINS + 1]]), walls)
+    assert np.all(body_domain[walls] == -1)
+    for state in sim.states:  # both buffers: the copies are made every substep
+        assert np.array_equal(state.body_pos.numpy()[walls], start_pos)
+        assert not state.body_vel.numpy()[walls].any()
+    pos = sim.state.body_pos.numpy()[len(walls):]
+    assert np.all(np.abs(pos[:, 0]) < 2.5) and np.all(np.abs(pos[:, 2]) < 1.0)

@@ -42,12 +42,16 @@ class PairContactPipeline:
             self.bin_weight = wp.zeros(BINS, dtype=float, device=device)
             self.bin_domain = wp.zeros(BINS, dtype=wp.int32, device=device)
             self.domain_cursor = wp.zeros(d + 1, dtype=wp.int32, device=device)
-            self.domain_body_start = wp.zeros(d + 1, dtype=wp.int32, device=device)
+            self.domain_body_start = wp.zeros(d + 2, dtype=wp.int32, device=device)
             self.domain_body = wp.zeros(n, dtype=wp.int32, device=device)
             self.domain_pair_start = wp.zeros(d + 2, dtype=wp.int32, device=device)
             self.domain_pair = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
-            self.schedule = DomainSchedule(d, 0, self.domain_body_start, self.domain_body, self.domain_pair_start,
-                                           self.domain_pair)
+            self.body_on_boundary = wp.zeros(n, dtype=wp.int32, device=device)
+            self.boundary_body_count = wp.zeros(1, dtype=wp.int32, device=device)
+            self.boundary_body = wp.zeros(n, dtype=wp.int32, device=device)
+            self.schedule = DomainSchedule(d, 0, 0, self.domain_body_start, self.domain_body, self.domain_pair_start,
+                                           self.domain_pair, self.body_domain, self.body_on_boundary,
+                                           self.boundary_body_count, self.boundary_body)
 
     def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
@@ -83,9 +87,12 @@ class PairContactPipeline:
                 self.domain_count, m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state.body_pos,
                 contacts.terrain_contact_active, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
                 self.body_weight, self.body_domain, self.bin_weight, self.bin_domain, self.domain_cursor,
-                self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair])
+                self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair,
+                self.body_on_boundary, self.boundary_body_count, self.boundary_body])
             bounds = self.domain_pair_start.numpy()
             self.schedule.boundary_pairs = int(bounds[-1] - bounds[-2])
+            listed = self.domain_body_start.numpy()
+            self.schedule.static_bodies = int(listed[-1] - listed[-2])
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
 
@@ -122,12 +129,21 @@ class PairContactPipeline:
 
 @dataclass
 class DomainSchedule:
+    """The slabs of solvers/domains.py: bodies of slab d at domain_body[domain_body_start[d]:
+    domain_body_start[d + 1]], static bodies after the last slab; pairs likewise, boundary pairs
+    after the last slab."""
+
     domain_count: int
     boundary_pairs: int
+    static_bodies: int
     domain_body_start: wp.array
     domain_body: wp.array
     domain_pair_start: wp.array
     domain_pair: wp.array
+    body_domain: wp.array
+    body_on_boundary: wp.array
+    boundary_body_count: wp.array
+    boundary_body: wp.array
 
 
 def default_pair_capacity(body_count: int) -> int:

@@ -30,8 +30,8 @@ valid, Gauss-Seidel order.
 import warp as wp
 
 from .contact_rows import TerrainRow
-from .pair_solve import MODE_RELAX, MODE_SOLVE, MODE_WARM_START, solve_one_pair
-from .staged import sweep_body_terrain
+from .pair_solve import MODE_RELAX, MODE_SOLVE, MODE_WARM_START, solve_one_pair, warm_start_pair_side
+from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
 
@@ -81,6 +81,9 @@ def partition_domains(
     domain_body: wp.array(dtype=wp.int32),
     domain_pair_start: wp.array(dtype=wp.int32),
     domain_pair: wp.array(dtype=wp.int32),
+    body_on_boundary: wp.array(dtype=wp.int32),
+    boundary_body_count: wp.array(dtype=wp.int32),
+    boundary_body: wp.array(dtype=wp.int32),
 ):
     n = body_pos.shape[0]
     pairs = pair_count[0]
@@ -126,23 +129,27 @@ def partition_domains(
         bin_domain[b] = wp.min(int(float(domain_count) * middle / wp.max(total, 1.0e-30)), domain_count - 1)
         running += bin_weight[b]
 
-    # bodies: count, scan, place (static bodies belong to no domain: they are never written)
-    for d in range(domain_count + 1):
+    # bodies: count, scan, place.  Static bodies belong to no slab (body_domain -1: no sweep writes
+    # them); they are listed after the slabs, as list domain_count, for the per-substep copies.
+    for d in range(domain_count + 2):
         domain_body_start[d] = 0
     for i in range(n):
         d = int(-1)
+        listed = domain_count
         if body_weight[i] > 0.0:
             d = bin_domain[bin_of(body_pos[i][axis], origin, extent)]
-            domain_body_start[d + 1] = domain_body_start[d + 1] + 1
+            listed = d
+        domain_body_start[listed + 1] = domain_body_start[listed + 1] + 1
         body_domain[i] = d
-    for d in range(domain_count):
+    for d in range(domain_count + 1):
         domain_body_start[d + 1] = domain_body_start[d + 1] + domain_body_start[d]
         domain_cursor[d] = domain_body_start[d]
     for i in range(n):
-        d = body_domain[i]
-        if d >= 0:
-            domain_body[domain_cursor[d]] = i
-            domain_cursor[d] = domain_cursor[d] + 1
+        listed = body_domain[i]
+        if listed < 0:
+            listed = domain_count
+        domain_body[domain_cursor[listed]] = i
+        domain_cursor[listed] = domain_cursor[listed] + 1
 
     # pairs: the domain of their dynamic bodies, or the boundary set (index domain_count)
     for d in range(domain_count + 2):
@@ -160,6 +167,21 @@ def partition_domains(
             domain_pair[domain_cursor[d]] = p
             domain_cursor[d] = domain_cursor[d] + 1
 
+    # the dynamic bodies of boundary pairs, each once, in pair order: the boundary thread integrates
+    # and finalizes them, after the last boundary sweep that moves them
+    for i in range(n):
+        body_on_boundary[i] = 0
+    listed = int(0)
+    for q in range(domain_pair_start[domain_count], domain_pair_start[domain_count + 1]):
+        ij = pair_body[domain_pair[q]]
+        for side in range(2):
+            b = ij[side]
+            if body_domain[b] >= 0 and body_on_boundary[b] == 0:
+                body_on_boundary[b] = 1
+                boundary_body[listed] = b
+                listed += 1
+    boundary_body_count[0] = listed
+
 
 @wp.func
 def walk(first: int, count: int, k: int, reverse: int) -> int:
@@ -176,25 +198,50 @@ def domain_sweep(
     domain_count: int,
     mode: int,
     reverse: int,
-    warm_start: int,
+    prepare: int,
+    integrate: int,
+    finalize: int,
     domain_body_start: wp.array(dtype=wp.int32),
     domain_body: wp.array(dtype=wp.int32),
     domain_pair_start: wp.array(dtype=wp.int32),
     domain_pair: wp.array(dtype=wp.int32),
+    body_domain: wp.array(dtype=wp.int32),
+    body_on_boundary: wp.array(dtype=wp.int32),
+    boundary_body_count: wp.array(dtype=wp.int32),
+    boundary_body: wp.array(dtype=wp.int32),
     # Model
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
     body_inv_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
+    gravity: wp.vec3,
     h: float,
+    integrator: int,
+    rotation: int,
+    reset_reference: int,
+    make_rows: int,
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
+    sim_step: wp.array(dtype=wp.int32),
+    # State in
+    body_pos_in: wp.array(dtype=wp.vec3),
+    body_quat_in: wp.array(dtype=wp.quat),
+    body_rot_in: wp.array(dtype=wp.mat33),
+    body_vel_in: wp.array(dtype=wp.vec3),
+    body_angmom_in: wp.array(dtype=wp.vec3),
     # Contacts in/out
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     pair_body: wp.array(dtype=wp.vec2i),
@@ -205,35 +252,91 @@ def domain_sweep(
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
+    solver_w0: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_rolling: wp.array(dtype=wp.vec3),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     terrain_row: wp.array(dtype=TerrainRow),
     terrain_row_count: wp.array(dtype=wp.int32),
+    # State out
+    body_pos_out: wp.array(dtype=wp.vec3),
+    body_quat_out: wp.array(dtype=wp.quat),
+    body_rot_out: wp.array(dtype=wp.mat33),
+    body_vel_out: wp.array(dtype=wp.vec3),
+    body_angmom_out: wp.array(dtype=wp.vec3),
+    # Out
+    body_bad_step: wp.array(dtype=wp.int32),
+    bad_count: wp.array(dtype=wp.int32),
 ):
     """One sweep of one slab (d < domain_count: its bodies' terrain contacts, then its pairs) or of
-    the boundary pairs (d == domain_count), in the pair_solve mode ``mode``; ``reverse`` walks
-    the same sequence backwards (symmetric Gauss-Seidel, see the module docstring)."""
+    the boundary pairs (d == domain_count), in the pair_solve mode ``mode``; ``reverse`` walks the
+    same sequence backwards (symmetric Gauss-Seidel, see the module docstring).
+
+    The per-body stages ride on the sweeps (see the module docstring): with ``prepare`` a slab
+    thread first prepares its bodies (prepare_body) and applies the warm start of its pairs and
+    of its side of the boundary pairs; with ``integrate`` or ``finalize`` it integrates or
+    finalizes, after its sweep, its bodies that no boundary pair touches, and the boundary thread
+    the others after the boundary sweep.  Static bodies are left to static_bodies."""
     d = first_domain + wp.tid() + tid_offset
-    terrain = d < domain_count and (mode == MODE_SOLVE or mode == MODE_RELAX)
-    use_bias = int(mode == MODE_SOLVE)
-    body_first = domain_body_start[d]
-    body_count = domain_body_start[d + 1] - body_first
     pair_first = domain_pair_start[d]
     pair_count = domain_pair_start[d + 1] - pair_first
-    if warm_start != 0:
-        # the pairs' warm start rides on the first sweep's launch: a launch split over the
-        # cores costs ~90 us of thread hand-off (launch.py), four of them a step
+    if d == domain_count:
+        for q in range(pair_count):
+            solve_one_pair(domain_pair[walk(pair_first, pair_count, q, reverse)], mode, body_inv_mass, body_friction,
+                           body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
+                           pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
+                           solver_v, solver_w)
+        for k in range(boundary_body_count[0]):
+            i = boundary_body[k]
+            if integrate != 0:
+                integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
+                               body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
+                               solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
+                               solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+            if finalize != 0:
+                finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
+                              body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
+                              body_vel_out, body_angmom_out, body_bad_step, bad_count)
+        return
+    body_first = domain_body_start[d]
+    body_count = domain_body_start[d + 1] - body_first
+    if prepare != 0:
+        for k in range(body_count):
+            prepare_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, body_checkpoint_start,
+                         body_checkpoint_count, gravity, h, integrator, rotation, reset_reference, make_rows, body_pos_in,
+                         body_rot_in, body_vel_in, body_angmom_in, terrain_contact_active, terrain_contact_point,
+                         terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
+                         terrain_contact_tangent_impulse, solver_v, solver_w, solver_inv_inertia, solver_rolling,
+                         solver_w0, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r, terrain_row,
+                         terrain_row_count)
         for k in range(pair_count):
             solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
                            body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
                            solver_v, solver_w)
+        # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
+        # boundary impulse applied after the first sweep let a stack split across two slabs sag
+        # 27 mm instead of 7)
+        boundary_first = domain_pair_start[domain_count]
+        for q in range(domain_pair_start[domain_count + 1] - boundary_first):
+            p = domain_pair[boundary_first + q]
+            ij = pair_body[p]
+            for side in range(2):
+                if body_domain[ij[side]] == d:
+                    warm_start_pair_side(p, side, body_inv_mass, pair_body, pair_point_count, pair_normal,
+                                         pair_point, pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
+                                         solver_ref_pos, solver_v, solver_w)
+    terrain = mode == MODE_SOLVE or mode == MODE_RELAX
+    use_bias = int(mode == MODE_SOLVE)
     # forward: terrain, then pairs; backward: the same sequence walked from its end
     for part in range(2):
         if (part == 0) == (reverse == 0):
@@ -252,3 +355,77 @@ def domain_sweep(
                                pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                                pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
                                solver_drift_r, solver_v, solver_w)
+    if integrate != 0 or finalize != 0:
+        for k in range(body_count):
+            i = domain_body[body_first + k]
+            if body_on_boundary[i] != 0:
+                continue  # a boundary pair moves it after this launch: the boundary thread does it
+            if integrate != 0:
+                integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
+                               body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
+                               solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
+                               solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+            if finalize != 0:
+                finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
+                              body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
+                              body_vel_out, body_angmom_out, body_bad_step, bad_count)
+
+
+@wp.kernel
+def static_bodies(
+    tid_offset: int,
+    domain_count: int,
+    reset_reference: int,
+    domain_body_start: wp.array(dtype=wp.int32),
+    domain_body: wp.array(dtype=wp.int32),
+    # State in
+    body_pos_in: wp.array(dtype=wp.vec3),
+    body_quat_in: wp.array(dtype=wp.quat),
+    body_rot_in: wp.array(dtype=wp.mat33),
+    body_vel_in: wp.array(dtype=wp.vec3),
+    body_angmom_in: wp.array(dtype=wp.vec3),
+    # Solver out
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_w0: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_rolling: wp.array(dtype=wp.vec3),
+    solver_shift_v: wp.array(dtype=wp.vec3),
+    solver_shift_w: wp.array(dtype=wp.vec3),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+    terrain_row_count: wp.array(dtype=wp.int32),
+    # State out
+    body_pos_out: wp.array(dtype=wp.vec3),
+    body_quat_out: wp.array(dtype=wp.quat),
+    body_rot_out: wp.array(dtype=wp.mat33),
+    body_vel_out: wp.array(dtype=wp.vec3),
+    body_angmom_out: wp.array(dtype=wp.vec3),
+):
+    """What prepare, integrate and finalize do for a static body, for the bodies listed after the
+    slabs, in one thread before the substep's sweeps: the sweeps read a static body's solver
+    state but never write it, and no slab owns it."""
+    first = domain_body_start[domain_count]
+    for k in range(domain_body_start[domain_count + 1] - first):
+        i = domain_body[first + k]
+        if reset_reference != 0:
+            solver_ref_pos[i] = body_pos_in[i]
+            solver_ref_rot[i] = body_rot_in[i]
+        zero = wp.vec3(0.0)
+        solver_v[i] = zero
+        solver_w[i] = zero
+        solver_w0[i] = zero
+        solver_inv_inertia[i] = wp.mat33(0.0)
+        solver_rolling[i] = zero
+        solver_shift_v[i] = zero
+        solver_shift_w[i] = zero
+        solver_drift_p[i] = zero
+        solver_drift_r[i] = wp.mat33(0.0)
+        terrain_row_count[i] = 0
+        body_pos_out[i] = body_pos_in[i]
+        body_quat_out[i] = body_quat_in[i]
+        body_rot_out[i] = body_rot_in[i]
+        body_vel_out[i] = body_vel_in[i]
+        body_angmom_out[i] = body_angmom_in[i]

@@ -171,6 +171,45 @@ def solve_one_pair(
         solver_w[j] = vel.wj
 
 
+@wp.func
+def warm_start_pair_side(
+    p: int,
+    side: int,
+    body_inv_mass: wp.array(dtype=float),
+    pair_body: wp.array(dtype=wp.vec2i),
+    pair_point_count: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
+    pair_normal_impulse: wp.array(dtype=float),
+    pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    """Pair p's stored impulses applied to one of its bodies (side 0: body i gets +P; side 1: body j
+    gets -P).  A warm start touches each body with its own arm and inverse mass only, so the two
+    halves of a pair whose bodies belong to two threads can be applied by those two threads
+    (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair."""
+    b = pair_body[p][side]
+    inv_mass = body_inv_mass[b]
+    if inv_mass == 0.0:
+        return
+    sign = wp.where(side == 0, 1.0, -1.0)
+    n = pair_normal[p]
+    x = solver_ref_pos[b]
+    inv_inertia = solver_inv_inertia[b]
+    v = solver_v[b]
+    w = solver_w[b]
+    for k in range(pair_point_count[p]):
+        slot = p * POINTS + k
+        impulse = sign * (pair_normal_impulse[slot] * n + pair_tangent_impulse[slot])
+        v = v + inv_mass * impulse
+        w = w + inv_inertia * wp.cross(pair_point[slot] - x, impulse)
+    solver_v[b] = v
+    solver_w[b] = w
+
+
 @wp.kernel
 def pair_pass(
     tid_offset: int,

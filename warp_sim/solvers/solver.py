@@ -15,12 +15,13 @@ from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
-from .domains import domain_sweep
+from .domains import domain_sweep, static_bodies
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
                          MODE_WARM_START, pair_pass)
 from .soft_step import soft_coefficients, solve_and_integrate
-from .staged import finalize_bodies, integrate_positions, prepare_bodies, terrain_restitution, terrain_sweep
+from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
+                     terrain_restitution, terrain_sweep)
 
 
 @dataclass
@@ -45,6 +46,10 @@ class SolverSettings:
 
 
 class SoftStepSolver:
+    # Contact rows of spheres and cubes are built once per collision pass (staged.prepare_body);
+    # tests turn this off to check that rebuilding them every substep changes nothing.
+    reuse_isotropic_rows = True
+
     def __init__(self, settings: SolverSettings, gravity, device, body_count: int = 0):
         self.settings = settings
         self.gravity = wp.vec3(*gravity)
@@ -99,10 +104,14 @@ class SoftStepSolver:
             self.terrain_row_count = wp.zeros(max(model.body_count, 1), dtype=wp.int32, device=self.device)
         return self.terrain_row, self.terrain_row_count
 
+    def _make_rows(self) -> int:
+        return MAKE_ROWS if self.reuse_isotropic_rows else MAKE_ROWS_ALWAYS
+
     def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.gravity, dt, integrator, int(fresh_contacts), int(make_rows),
+            self.gravity, dt, integrator, ROTATIONS[self.settings.rotation], int(fresh_contacts),
+            self._make_rows() if make_rows else MAKE_ROWS_NONE,
             state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
             c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
@@ -148,8 +157,28 @@ class SoftStepSolver:
             device=self.device,
         )
 
+    def _finalize(self, m, state_in, state_out, dt, integrator, body_bad_step, bad_count):
+        launch(finalize_bodies, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
+            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
+            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_w0,
+            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
+            body_bad_step, bad_count], device=self.device)
+
+    def _restitution_terrain(self, m, c, phase: int):
+        launch(terrain_restitution, m.body_count, key=self, inputs=[
+            m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
+            self.settings.restitution_threshold, phase,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+            c.terrain_contact_normal_impulse,
+            self.solver_inv_inertia, self.solver_ref_pos, self.solver_v, self.solver_w], device=self.device)
+
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
                      fresh_contacts, domains=None):
+        if domains is not None:
+            self._step_domains(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, fresh_contacts,
+                               domains)
+            return
         s = self.settings
         m, c = model, contacts
         n = m.body_count
@@ -183,75 +212,95 @@ class SoftStepSolver:
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
                     self.solver_v, self.solver_w], device=dev)
 
-        def slabs(mode: int, reverse: int = 0, warm_start: int = 0):
-            """Terrain (solve and relax modes) and pairs of every slab at once, then the boundary pairs;
-            ``warm_start`` first re-applies the pairs' impulses (each slab's, then the boundary's)."""
-            g = domains
-            shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair,
-                      m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_restitution,
-                      m.body_rolling_resistance, m.body_checkpoint_start,
-                      dt, soft, s.max_push_velocity, s.restitution_threshold,
-                      c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                      c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
-                      c.pair_normal_impulse, c.pair_tangent_impulse,
-                      self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                      self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count]
-
-            def sweep(first_domain: int, count: int, sweep_mode: int, warm: int):
-                launch(domain_sweep, count, [first_domain, g.domain_count, sweep_mode, reverse, warm, *shared], dev,
-                       key=self, min_chunk=1)
-
-            if warm_start and g.boundary_pairs:
-                # before any slab solves: a boundary pair's impulse applied after them was measured to
-                # let a 10-box stack split across two slabs sag 27 mm instead of 7
-                sweep(g.domain_count, 1, MODE_WARM_START, 0)
-            sweep(0, g.domain_count, mode, warm_start)
-            if g.boundary_pairs:
-                sweep(g.domain_count, 1, mode, 0)
-
-        if domains is not None:
-            # Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the
-            # relax sweep goes on backwards, so neither end of the body order is favoured.
-            # Measured (stack of 10 built bottom-up and top-down, pyramid of base 10; F forward,
-            # B backward): F F F: the stack still sagged 9 % past its static spring value after
-            # 1 s; B F B: the pyramid crept 15 mm; F B F: the bottom-up stack 3 % past; F B B:
-            # within 0.5 % and 0.55 mm (colours: 0.3 % and 0.8 mm).
-            if s.iterations == 0:
-                slabs(MODE_WARM_START)
-            for k in range(s.iterations):
-                slabs(MODE_SOLVE, k % 2, int(k == 0))
-            self._integrate_positions(m, state_in, state_out, dt, integrator)
-            for _ in range(s.relax_iterations):
-                slabs(MODE_RELAX, 1)
-        else:
-            pairs(MODE_WARM_START)
-            for _ in range(s.iterations):
-                terrain(1)
-                pairs(MODE_SOLVE)
-            self._integrate_positions(m, state_in, state_out, dt, integrator)
-            for _ in range(s.relax_iterations):
-                terrain(0)
-                pairs(MODE_RELAX)
+        pairs(MODE_WARM_START)
+        for _ in range(s.iterations):
+            terrain(1)
+            pairs(MODE_SOLVE)
+        self._integrate_positions(m, state_in, state_out, dt, integrator)
+        for _ in range(s.relax_iterations):
+            terrain(0)
+            pairs(MODE_RELAX)
         # a scene without restitution pays for no restitution passes
         phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
         for phase, mode in phases:
-            launch(terrain_restitution, n, key=self, inputs=[
-                m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
-                s.restitution_threshold, phase,
-                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-                c.terrain_contact_normal_impulse,
-                self.solver_inv_inertia, self.solver_ref_pos, self.solver_v, self.solver_w], device=dev)
-            if domains is not None:
-                slabs(mode)
-            else:
-                pairs(mode)
-        launch(finalize_bodies, n, key=self, min_chunk=LIGHT_CHUNK, inputs=[
-            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
-            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0,
-            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
-            body_bad_step, bad_count], device=dev)
+            self._restitution_terrain(m, c, phase)
+            pairs(mode)
+        self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
+    def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g):
+        """The staged soft step swept slab by slab (solvers/domains.py).
+
+        Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the relax
+        sweep goes on backwards, so neither end of the body order is favoured.  Measured (stack of
+        10 built bottom-up and top-down, pyramid of base 10; F forward, B backward): F F F: the
+        stack still sagged 9 % past its static spring value after 1 s; B F B: the pyramid crept
+        15 mm; F B F: the bottom-up stack 3 % past; F B B: within 0.5 % and 0.55 mm (colours:
+        0.3 % and 0.8 mm).
+
+        Each sweep is the slabs' launch, then the boundary pairs' (one thread).  The per-body stages
+        ride on them instead of running as launches of their own, which saves three launches
+        split over the cores per substep (~0.1 ms of thread hand-off each, launch.py): each slab
+        thread prepares its bodies at the start of the first sweep; after the last solve sweep
+        (relax sweep) it integrates (finalizes) those of its bodies that no boundary pair
+        touches, and the boundary thread the rest, after the boundary pairs' sweep.  The order
+        of the sweeps is unchanged by this (moving the boundary sweep first so that the slabs
+        could finish every body themselves let a 10-box stack cut into slabs sag 9.2 mm instead
+        of 6.9: two boundary sweeps in a row converge as one)."""
+        s = self.settings
+        integrator = INTEGRATORS[s.integrator]
+        rotation = ROTATIONS[s.rotation]
+        dev = self.device
+        shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair, g.body_domain,
+                  g.body_on_boundary, g.boundary_body_count, g.boundary_body,
+                  m.body_shape, m.body_size, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, m.body_friction,
+                  m.body_restitution, m.body_rolling_resistance, m.body_checkpoint_start, m.body_checkpoint_count,
+                  self.gravity, dt, integrator, rotation, int(fresh_contacts), self._make_rows(), self._soft(dt),
+                  s.max_push_velocity,
+                  s.restitution_threshold, self.sim_step,
+                  state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+                  c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
+                  c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
+                  c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
+                  c.pair_normal_impulse, c.pair_tangent_impulse,
+                  self.solver_v, self.solver_w, self.solver_w0, self.solver_inv_inertia, self.solver_rolling,
+                  self.solver_shift_v, self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
+                  self.solver_drift_p, self.solver_drift_r, *self._terrain_rows(m, c),
+                  state_out.body_pos, state_out.body_quat, state_out.body_rot, state_out.body_vel,
+                  state_out.body_angmom, body_bad_step, bad_count]
+
+        def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0):
+            launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
+                                                  *shared], dev, key=self, min_chunk=1)
+            if g.boundary_pairs:
+                launch(domain_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, 0, integrate, finalize,
+                                         *shared], dev, key=self, min_chunk=1)
+
+        if g.static_bodies:
+            launch(static_bodies, 1, [g.domain_count, int(fresh_contacts), g.domain_body_start, g.domain_body,
+                                      state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_vel,
+                                      state_in.body_angmom, self.solver_v, self.solver_w, self.solver_w0,
+                                      self.solver_inv_inertia, self.solver_rolling, self.solver_shift_v,
+                                      self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
+                                      self.solver_drift_p, self.solver_drift_r, self.terrain_row_count,
+                                      state_out.body_pos, state_out.body_quat, state_out.body_rot,
+                                      state_out.body_vel, state_out.body_angmom], dev, key=self, min_chunk=1)
+        iterations, relax = s.iterations, s.relax_iterations
+        fuse_finalize = relax > 0 and not m.has_restitution
+        if iterations == 0:
+            self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True)
+            sweep(MODE_WARM_START, 0)
+            self._integrate_positions(m, state_in, state_out, dt, integrator)
+        for k in range(iterations):
+            sweep(MODE_SOLVE, k % 2, prepare=int(k == 0), integrate=int(k == iterations - 1))
+        for k in range(relax):
+            sweep(MODE_RELAX, 1, finalize=int(k == relax - 1 and fuse_finalize))
+        # a scene without restitution pays for no restitution passes
+        phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
+        for phase, mode in phases:
+            self._restitution_terrain(m, c, phase)
+            sweep(mode, 0)
+        if not fuse_finalize:
+            self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
     def _step_pushout(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes):
         """The thesis's response (pushout.py): one impulse pass, integrate, then position push-out."""
