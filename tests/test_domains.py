@@ -7,6 +7,7 @@ import pytest
 
 from warp_sim import ModelBuilder, PlaneTerrain, SimConfig, Simulator, cases
 from warp_sim.builder import Material
+from warp_sim.solvers.domains import BINS, CUT_SLACK
 
 DOMAINS = 3  # more slabs than this machine may have cores: the schedule must not depend on them
 
@@ -60,9 +61,10 @@ def test_slabs_are_ordered_along_the_cut_axis_and_balanced(rain):
         weight[i] += k
         weight[j] += k
     share = np.array([weight[body_domain == d].sum() for d in range(DOMAINS)])
-    # a slab is cut at bin granularity: it can be off its share by at most one bin's work, which in
-    # this even rain is a few bodies' worth (bound: 2 % of a share, ~10 bodies of ~5 units each)
-    assert np.abs(share - weight.sum() / DOMAINS).max() <= 0.02 * weight.sum() / DOMAINS + weight.max()
+    # each of a slab's two cuts lies within CUT_SLACK of a share of its balanced place (it may move to
+    # where no pair crosses it), at bin granularity: one bin's work more, a few bodies' worth here
+    # (bound: 2 % of a share, ~10 bodies of ~5 units each)
+    assert np.abs(share - weight.sum() / DOMAINS).max() <= (2 * CUT_SLACK + 0.02) * weight.sum() / DOMAINS + weight.max()
 
 
 def test_every_touching_pair_is_solved_in_exactly_one_place(rain):
@@ -133,3 +135,25 @@ def test_static_bodies_are_listed_after_the_slabs_and_stay_put(monkeypatch):
         assert not state.body_vel.numpy()[walls].any()
     pos = sim.state.body_pos.numpy()[len(walls):]
     assert np.all(np.abs(pos[:, 0]) < 2.5) and np.all(np.abs(pos[:, 2]) < 1.0)
+
+
+def test_a_cut_moves_to_a_gap_within_reach(monkeypatch):
+    """Two rows of touching balls, 52 and 48, with a gap between: the balanced cut (half the work)
+    falls inside the longer row, the gap lies 4 % of a slab's work away, within CUT_SLACK, so the
+    cut goes there and no pair crosses it (no boundary launch at all)."""
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "2")
+    b = ModelBuilder(Material(friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    xs = [0.49 * k for k in range(52)] + [0.49 * 51 + 2.0 + 0.49 * k for k in range(48)]
+    for x in xs:
+        b.add_sphere(0.25, 1.0, position=(x, 0.25, 0.0))
+    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False))
+    sim.step(1)
+    p = sim.pairs
+    work_before, crossing = p.bin_work_before.numpy(), p.bin_crossing.numpy()
+    share = work_before[BINS] / 2
+    balanced = int(np.argmin(np.abs(work_before - share)))
+    assert crossing[balanced] > 0  # the balanced cut would cut the long row
+    body_domain = p.body_domain.numpy()
+    assert p.schedule.boundary_pairs == 0
+    assert np.all(body_domain[:52] == 0) and np.all(body_domain[52:] == 1)

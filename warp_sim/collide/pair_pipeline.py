@@ -40,6 +40,8 @@ class PairContactPipeline:
             self.body_weight = wp.zeros(n, dtype=float, device=device)
             self.body_domain = wp.zeros(n, dtype=wp.int32, device=device)
             self.bin_weight = wp.zeros(BINS, dtype=float, device=device)
+            self.bin_work_before = wp.zeros(BINS + 1, dtype=float, device=device)
+            self.bin_crossing = wp.zeros(BINS + 1, dtype=wp.int32, device=device)
             self.bin_domain = wp.zeros(BINS, dtype=wp.int32, device=device)
             self.domain_cursor = wp.zeros(d + 1, dtype=wp.int32, device=device)
             self.domain_body_start = wp.zeros(d + 2, dtype=wp.int32, device=device)
@@ -86,7 +88,8 @@ class PairContactPipeline:
             wp.launch(partition_domains, dim=1, device=self.device, inputs=[
                 self.domain_count, m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state.body_pos,
                 contacts.terrain_contact_active, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
-                self.body_weight, self.body_domain, self.bin_weight, self.bin_domain, self.domain_cursor,
+                self.body_weight, self.body_domain, self.bin_weight, self.bin_work_before, self.bin_crossing,
+                self.bin_domain, self.domain_cursor,
                 self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair,
                 self.body_on_boundary, self.boundary_body_count, self.boundary_body])
             bounds = self.domain_pair_start.numpy()
