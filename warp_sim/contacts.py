@@ -43,6 +43,7 @@ class Contacts:
         terrain_contact_normal_impulse: accumulated normal impulse [N s], kept for warm start.
         terrain_contact_tangent_impulse: accumulated friction impulse, world vec3 [N s].
         terrain_contact_surface: (x, z) of the last closest surface point (sphere warm start).
+        terrain_contact_count: active slots per body (the CPU slab partition weighs bodies by it).
         pair_body: (i, j), i < j, per candidate pair (a copy of the broad phase's sorted list).
         pair_count: candidate pairs this substep, int32[1]; pair_point_count: points per pair.
         pair_normal: per pair, from body j into body i.
@@ -52,7 +53,7 @@ class Contacts:
     the number, so the kernels pay no atomic for it.
     """
 
-    def __init__(self, slot_count: int, pair_max: int, device):
+    def __init__(self, slot_count: int, pair_max: int, device, body_count: int = 0):
         self.slot_count = slot_count
         self.pair_max = pair_max
         n = max(slot_count, 1)
@@ -63,6 +64,7 @@ class Contacts:
         self.terrain_contact_normal_impulse = wp.zeros(n, dtype=float, device=device)
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
+        self.terrain_contact_count = wp.zeros(max(body_count, 1), dtype=wp.int32, device=device)
         m = max(pair_max, 1)
         k = m * POINTS_PER_PAIR
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=device)

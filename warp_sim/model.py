@@ -83,4 +83,4 @@ class Model:
         return s
 
     def contacts(self, pair_max: int = 0) -> Contacts:
-        return Contacts(self.checkpoint_count, pair_max, self.device)
+        return Contacts(self.checkpoint_count, pair_max, self.device, self.body_count)

@@ -133,8 +133,10 @@ class Simulator:
         capacity = 0
         if config.body_contact and model.body_count >= 2 and dynamic >= 1:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
+            # with the slab schedule only sleeping (neighbour timers) and push-out still walk colours
             self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device,
-                                             self._domain_count(config))
+                                             self._domain_count(config),
+                                             colors=config.sleep or config.solver == "pushout")
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -178,6 +180,8 @@ class Simulator:
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
                 contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_surface,
+                # Out
+                contacts.terrain_contact_count,
             ],
             device=self.device,
         )

@@ -21,9 +21,10 @@ from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept
 
 
 class PairContactPipeline:
-    def __init__(self, model, broad_phase: str, capacity: int, device, domain_count: int = 0):
+    def __init__(self, model, broad_phase: str, capacity: int, device, domain_count: int = 0, colors: bool = True):
         """``domain_count`` > 0 also cuts the scene into that many slabs for the CPU solver
-        schedule (solvers/domains.py); 0 leaves the colouring as the only schedule."""
+        schedule (solvers/domains.py); 0 leaves the colouring as the only schedule.  ``colors``:
+        colour the pairs even then (for sleeping and push-out, which walk colours)."""
         self.model = model
         self.device = device
         self.capacity = capacity
@@ -34,6 +35,7 @@ class PairContactPipeline:
         self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
+        self.colors = colors or domain_count == 0
         self.schedule = None
         if domain_count > 0:
             d = domain_count
@@ -80,14 +82,15 @@ class PairContactPipeline:
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
-        wp.launch(color_pairs, dim=1, device=self.device, inputs=[
-            m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
-            self.body_color_mask, self.pair_color, self.color_cursor,
-            contacts.color_start, contacts.color_pairs_sorted])
+        if self.colors:
+            wp.launch(color_pairs, dim=1, device=self.device, inputs=[
+                m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
+                self.body_color_mask, self.pair_color, self.color_cursor,
+                contacts.color_start, contacts.color_pairs_sorted])
         if self.domain_count > 0:
             wp.launch(partition_domains, dim=1, device=self.device, inputs=[
-                self.domain_count, m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state.body_pos,
-                contacts.terrain_contact_active, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
+                self.domain_count, m.body_inv_mass, state.body_pos,
+                contacts.terrain_contact_count, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
                 self.body_weight, self.body_domain, self.bin_weight, self.bin_work_before, self.bin_crossing,
                 self.bin_domain, self.domain_cursor,
                 self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair,
@@ -96,6 +99,8 @@ class PairContactPipeline:
             self.schedule.boundary_pairs = int(bounds[-1] - bounds[-2])
             listed = self.domain_body_start.numpy()
             self.schedule.static_bodies = int(listed[-1] - listed[-2])
+        if not self.colors:
+            return [0] * (COLOR_COUNT + 1)  # not coloured: the slabs schedule every pair
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
 

@@ -154,6 +154,8 @@ def collide_terrain(
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
     terrain_contact_surface: wp.array(dtype=wp.vec2),
+    # Out
+    terrain_contact_count: wp.array(dtype=wp.int32),
 ):
     """One thread per body, over its slots: the body's velocity and, for a box on the Fourier
     terrain, the surface sample under its centre are computed once and serve every checkpoint."""
@@ -175,6 +177,7 @@ def collide_terrain(
                                 x[0], x[2])
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
+    active = int(0)
     for slot in range(start, start + count):
         depth = float(-1.0e30)
         normal = wp.vec3(0.0, 1.0, 0.0)
@@ -233,6 +236,7 @@ def collide_terrain(
         approach = wp.max(-wp.dot(point_vel, normal), 0.0)
         gap_closable = speculative_margin + h * approach + h * h * gravity_length
         if depth > -gap_closable:
+            active += 1
             terrain_contact_active[slot] = 1
             terrain_contact_point[slot] = point
             terrain_contact_normal[slot] = normal
@@ -241,3 +245,4 @@ def collide_terrain(
             terrain_contact_active[slot] = 0
             terrain_contact_normal_impulse[slot] = 0.0
             terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+    terrain_contact_count[body] = active

@@ -66,12 +66,10 @@ def partition_domains(
     domain_count: int,
     # Model
     body_inv_mass: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     # Contacts in
-    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_count: wp.array(dtype=wp.int32),
     pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
@@ -100,10 +98,7 @@ def partition_domains(
     for i in range(n):
         weight = float(0.0)
         if body_inv_mass[i] > 0.0:
-            weight = float(1.0)
-            start = body_checkpoint_start[i]
-            for slot in range(start, start + body_checkpoint_count[i]):
-                weight += float(terrain_contact_active[slot])
+            weight = float(1 + terrain_contact_count[i])
             lo = wp.min(lo, body_pos[i])
             hi = wp.max(hi, body_pos[i])
         body_weight[i] = weight
