@@ -9,7 +9,7 @@ import warp as wp
 
 from warp_sim import FourierTerrain, ModelBuilder, PlaneTerrain, SimConfig, Simulator
 from warp_sim.builder import random_quaternions
-from warp_sim.terrain import fourier_sample, terrain_model_fields
+from warp_sim.terrain import fourier_height_slope, fourier_sample, terrain_model_fields
 
 TERRAINS = [
     FourierTerrain(),
@@ -31,6 +31,7 @@ def sample_kernel(
     out_height: wp.array(dtype=float),
     out_grad: wp.array(dtype=wp.vec2),
     out_hess: wp.array(dtype=wp.vec3),
+    out_slope_mismatch: wp.array(dtype=int),
 ):
     i = wp.tid()
     s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
@@ -38,6 +39,10 @@ def sample_kernel(
     out_height[i] = s.height
     out_grad[i] = s.grad
     out_hess[i] = s.hess
+    # the height-and-slope sample (box checkpoints) must be the same numbers, bit for bit
+    q = fourier_height_slope(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+                             points[i][0], points[i][1])
+    out_slope_mismatch[i] = int(q.height != s.height or q.grad[0] != s.grad[0] or q.grad[1] != s.grad[1])
 
 
 def warp_sample(terrain, xz, device):
@@ -46,10 +51,12 @@ def warp_sample(terrain, xz, device):
     h = wp.zeros(n, dtype=float, device=device)
     g = wp.zeros(n, dtype=wp.vec2, device=device)
     hs = wp.zeros(n, dtype=wp.vec3, device=device)
+    mismatch = wp.zeros(n, dtype=int, device=device)
     wp.launch(sample_kernel, dim=n, device=device, inputs=[
         wp.array(f["terrain_coef"], dtype=wp.vec2, device=device), f["terrain_terms"], f["terrain_frequency"],
         wp.vec3(*f["terrain_scale"]), wp.vec3(*f["terrain_offset"]),
-        wp.array(xz.astype(np.float32), dtype=wp.vec2, device=device), h, g, hs])
+        wp.array(xz.astype(np.float32), dtype=wp.vec2, device=device), h, g, hs, mismatch])
+    assert not mismatch.numpy().any(), "fourier_height_slope differs from fourier_sample"
     return h.numpy(), g.numpy(), hs.numpy()
 
 

@@ -46,7 +46,7 @@ so a fast body stops on the surface instead of passing through it.
 import warp as wp
 
 from ..integrate import world_inv_inertia
-from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_normal, fourier_sample
+from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
 from ..types import SHAPE_SPHERE
 
 NEWTON_ITERATIONS = 6
@@ -227,8 +227,8 @@ def collide_terrain(
                         gap = speculative_margin + h * wp.length(v + wp.cross(omega, arm)) + h * h * gravity_length
                         reachable = point[1] - (center.height + rise) <= gap * gap_scale + slack
                     if reachable:
-                        s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                           terrain_offset, point[0], point[2])
+                        s = fourier_height_slope(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
+                                                 terrain_offset, point[0], point[2])
                         normal = fourier_normal(s.grad)
                         depth = (s.height - point[1]) * normal[1]
 

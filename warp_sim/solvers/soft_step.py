@@ -164,15 +164,16 @@ def solve_rolling(
     """
     acc = vel.rolling_impulse
     roll = vel.w
-    speed = wp.length(roll)
+    # against the spin w with the mass 1 / (a . I^-1 a) of its axis a = w / |w|:
+    # Delta = -(|w| / a . I^-1 a) a = -(|w|^2 / w . I^-1 w) w, with no square root; the clamp
+    # takes one only when it bites
+    speed2 = wp.dot(roll, roll)
     new_acc = acc
-    if speed > 1.0e-9:
-        axis = roll / speed
-        k = wp.dot(axis, inv_inertia * axis)
-        new_acc = acc - (speed / k) * axis
-    mag = wp.length(new_acc)
-    if mag > limit:
-        new_acc = new_acc * (limit / mag)
+    if speed2 > 1.0e-18:
+        new_acc = acc - (speed2 / wp.dot(roll, inv_inertia * roll)) * roll
+    mag2 = wp.dot(new_acc, new_acc)
+    if mag2 > limit * limit:
+        new_acc = new_acc * (limit / wp.sqrt(mag2))
     out = vel
     out.w = vel.w + inv_inertia * (new_acc - acc)
     out.rolling_impulse = new_acc
