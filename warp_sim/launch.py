@@ -34,6 +34,7 @@ LIGHT_CHUNK = 1 << 16  # for kernels of a few loads and stores a thread (cell ke
 MIN_CHUNK = 4096  # below this a chunk costs more in thread hand-off than it saves (rain of 1k bodies:
 #                   43 steps/s on one thread, 38 split in two; 10k: 5.3 on one, 8.1 split)
 
+_CPU_COUNT = os.cpu_count() or 1  # asked once: the call costs ~9 us, and launches ask per launch
 _pool: ThreadPoolExecutor | None = None
 _warm: set = set()
 _recorded: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # owner -> {(kernel, device): _Recorded}
@@ -55,7 +56,7 @@ def cpu_threads() -> int:
         if threads < 1:
             raise ValueError(f"WARP_SIM_CPU_THREADS must be a positive integer, got {value!r}")
         return threads
-    return os.cpu_count() or 1
+    return _CPU_COUNT
 
 
 def _executor(threads: int) -> ThreadPoolExecutor:
