@@ -20,11 +20,21 @@ which converges at least as fast as the coloured order.  Only the pairs across t
 wait for the second stage: a few percent of the pairs in a pile.  Two launches per sweep instead
 of one per colour plus one for the terrain.
 
+The per-body stages of a substep ride on the sweep launches instead of paying hand-offs of
+their own (solver.py, _step_domains): a slab thread prepares its bodies and warm-starts its
+pairs at the start of the first sweep (its side of each boundary pair too: a warm start moves
+each body by its own share only, see pair_solve.warm_start_pair_side); after the last solve
+sweep it integrates, and after the relax sweep finalizes, its bodies that no boundary pair
+touches, and the boundary thread does the others once their pairs are swept.  The static
+bodies, listed after the slabs, are copied by one thread before the sweeps (static_bodies).
+
 The partition is computed by one thread once per collision pass (weights, a histogram of 1024
 bins along the axis, cuts at equal cumulative work, then count / scan / place of bodies and
 pairs), in body and pair order, so the schedule and the results are the same on every run with
 the same thread count (WARP_SIM_CPU_THREADS); a different thread count is a different, equally
-valid, Gauss-Seidel order.
+valid, Gauss-Seidel order.  A cut may move by up to CUT_SLACK of a slab's work to a place that
+no touching pair crosses: with no boundary pairs at all the boundary launches are skipped
+(a rain of 1k bodies: 117 -> 163 steps/s).
 """
 
 import warp as wp
