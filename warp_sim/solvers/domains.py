@@ -26,7 +26,8 @@ pairs at the start of the first sweep (its side of each boundary pair too: a war
 each body by its own share only, see pair_solve.warm_start_pair_side); after the last solve
 sweep it integrates, and after the relax sweep finalizes, its bodies that no boundary pair
 touches, and the boundary thread does the others once their pairs are swept.  The static
-bodies, listed after the slabs, are copied by one thread before the sweeps (static_bodies).
+bodies, listed after the slabs, are prepared, integrated and finalized (copied) by one thread
+before the sweeps (domain_sweep with d = D + 1).
 
 The partition is computed by one thread once per collision pass (weights, a histogram of 1024
 bins along the axis, cuts at equal cumulative work, then count / scan / place of bodies and
@@ -326,8 +327,29 @@ def domain_sweep(
     thread first prepares its bodies (prepare_body) and applies the warm start of its pairs and
     of its side of the boundary pairs; with ``integrate`` or ``finalize`` it integrates or
     finalizes, after its sweep, its bodies that no boundary pair touches, and the boundary thread
-    the others after the boundary sweep.  Static bodies are left to static_bodies."""
+    the others after the boundary sweep.  d == domain_count + 1 runs all three stages for the
+    static bodies."""
     d = first_domain + wp.tid() + tid_offset
+    if d > domain_count:
+        # the static bodies (listed after the slabs), before any sweep: the sweeps read their solver
+        # state but never write it, and no slab owns them
+        first = domain_body_start[domain_count]
+        for k in range(domain_body_start[domain_count + 1] - first):
+            i = domain_body[first + k]
+            prepare_body(i, body_inv_mass, body_inv_inertia, body_checkpoint_start, body_checkpoint_count, gravity, h,
+                         integrator, rotation, reset_reference, make_rows, body_pos_in, body_rot_in, body_vel_in,
+                         body_angmom_in, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
+                         terrain_contact_depth, terrain_contact_normal_impulse, terrain_contact_tangent_impulse,
+                         solver_v, solver_w, solver_inv_inertia, solver_rolling, solver_w0, solver_ref_pos,
+                         solver_ref_rot, solver_drift_p, solver_drift_r, terrain_row, terrain_row_count)
+            integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
+                           body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
+                           solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
+                           solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+            finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in, body_vel_in,
+                          body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out, body_vel_out,
+                          body_angmom_out, body_bad_step, bad_count)
+        return
     pair_first = domain_pair_start[d]
     pair_count = domain_pair_start[d + 1] - pair_first
     if d == domain_count:
@@ -412,63 +434,3 @@ def domain_sweep(
                 finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
                               body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
                               body_vel_out, body_angmom_out, body_bad_step, bad_count)
-
-
-@wp.kernel
-def static_bodies(
-    tid_offset: int,
-    domain_count: int,
-    reset_reference: int,
-    domain_body_start: wp.array(dtype=wp.int32),
-    domain_body: wp.array(dtype=wp.int32),
-    # State in
-    body_pos_in: wp.array(dtype=wp.vec3),
-    body_quat_in: wp.array(dtype=wp.quat),
-    body_rot_in: wp.array(dtype=wp.mat33),
-    body_vel_in: wp.array(dtype=wp.vec3),
-    body_angmom_in: wp.array(dtype=wp.vec3),
-    # Solver out
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_w0: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_rolling: wp.array(dtype=wp.vec3),
-    solver_shift_v: wp.array(dtype=wp.vec3),
-    solver_shift_w: wp.array(dtype=wp.vec3),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_ref_rot: wp.array(dtype=wp.mat33),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    terrain_row_count: wp.array(dtype=wp.int32),
-    # State out
-    body_pos_out: wp.array(dtype=wp.vec3),
-    body_quat_out: wp.array(dtype=wp.quat),
-    body_rot_out: wp.array(dtype=wp.mat33),
-    body_vel_out: wp.array(dtype=wp.vec3),
-    body_angmom_out: wp.array(dtype=wp.vec3),
-):
-    """What prepare, integrate and finalize do for a static body, for the bodies listed after the
-    slabs, in one thread before the substep's sweeps: the sweeps read a static body's solver
-    state but never write it, and no slab owns it."""
-    first = domain_body_start[domain_count]
-    for k in range(domain_body_start[domain_count + 1] - first):
-        i = domain_body[first + k]
-        if reset_reference != 0:
-            solver_ref_pos[i] = body_pos_in[i]
-            solver_ref_rot[i] = body_rot_in[i]
-        zero = wp.vec3(0.0)
-        solver_v[i] = zero
-        solver_w[i] = zero
-        solver_w0[i] = zero
-        solver_inv_inertia[i] = wp.mat33(0.0)
-        solver_rolling[i] = zero
-        solver_shift_v[i] = zero
-        solver_shift_w[i] = zero
-        solver_drift_p[i] = zero
-        solver_drift_r[i] = wp.mat33(0.0)
-        terrain_row_count[i] = 0
-        body_pos_out[i] = body_pos_in[i]
-        body_quat_out[i] = body_quat_in[i]
-        body_rot_out[i] = body_rot_in[i]
-        body_vel_out[i] = body_vel_in[i]
-        body_angmom_out[i] = body_angmom_in[i]

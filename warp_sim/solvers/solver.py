@@ -16,7 +16,7 @@ from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
 from .coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
-from .domains import domain_sweep, static_bodies
+from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
                          MODE_WARM_START, pair_pass)
@@ -297,14 +297,7 @@ class SoftStepSolver:
                        key=self._site(state_in, "boundary", mode, reverse, integrate, finalize), min_chunk=1)
 
         if g.static_bodies:
-            launch(static_bodies, 1, [g.domain_count, int(fresh_contacts), g.domain_body_start, g.domain_body,
-                                      state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_vel,
-                                      state_in.body_angmom, self.solver_v, self.solver_w, self.solver_w0,
-                                      self.solver_inv_inertia, self.solver_rolling, self.solver_shift_v,
-                                      self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
-                                      self.solver_drift_p, self.solver_drift_r, self.terrain_row_count,
-                                      state_out.body_pos, state_out.body_quat, state_out.body_rot,
-                                      state_out.body_vel, state_out.body_angmom], dev,
+            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
         iterations, relax = s.iterations, s.relax_iterations
         fuse_finalize = relax > 0 and not m.has_restitution
