@@ -135,8 +135,12 @@ def solve_terrain_row(
     mass_scale = float(1.0)
     impulse_scale = float(0.0)
     if separation > 0.0:
+        if use_bias < 0:
+            # relax of a scene with restitution: an open gap is left to the next substep's impact
+            # stage, which bounces it with its full approach speed (impact.py)
+            return wp.spatial_vector(w, v)
         bias = separation / h
-    elif use_bias != 0:
+    elif use_bias > 0:
         bias = wp.max(soft[0] * separation, -max_push_velocity)
         mass_scale = soft[1]
         impulse_scale = soft[2]

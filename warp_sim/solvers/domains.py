@@ -41,7 +41,8 @@ no touching pair crosses: with no boundary pairs at all the boundary launches ar
 import warp as wp
 
 from .contact_rows import TerrainRow
-from .pair_solve import MODE_RELAX, MODE_SOLVE, MODE_WARM_START, solve_one_pair, warm_start_pair_side
+from .impact import impact_begin_body, impact_terrain_body
+from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, solve_one_pair, warm_start_pair_side
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
@@ -271,6 +272,7 @@ def domain_sweep(
     rotation: int,
     reset_reference: int,
     make_rows: int,
+    from_impact: int,
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
@@ -309,6 +311,8 @@ def domain_sweep(
     solver_drift_r: wp.array(dtype=wp.mat33),
     terrain_row: wp.array(dtype=TerrainRow),
     terrain_row_count: wp.array(dtype=wp.int32),
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
     # State out
     body_pos_out: wp.array(dtype=wp.vec3),
     body_quat_out: wp.array(dtype=wp.quat),
@@ -337,7 +341,7 @@ def domain_sweep(
         for k in range(domain_body_start[domain_count + 1] - first):
             i = domain_body[first + k]
             prepare_body(i, body_inv_mass, body_inv_inertia, body_checkpoint_start, body_checkpoint_count, gravity, h,
-                         integrator, rotation, reset_reference, make_rows, body_pos_in, body_rot_in, body_vel_in,
+                         integrator, rotation, reset_reference, make_rows, from_impact, body_pos_in, body_rot_in, body_vel_in,
                          body_angmom_in, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
                          terrain_contact_depth, terrain_contact_normal_impulse, terrain_contact_tangent_impulse,
                          solver_v, solver_w, solver_inv_inertia, solver_rolling, solver_w0, solver_ref_pos,
@@ -373,10 +377,17 @@ def domain_sweep(
         return
     body_first = domain_body_start[d]
     body_count = domain_body_start[d + 1] - body_first
-    if prepare != 0:
+    if prepare != 0 and mode == MODE_IMPACT:
+        for k in range(body_count):
+            impact_begin_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, gravity, h, integrator,
+                              rotation, reset_reference, body_pos_in, body_rot_in, body_vel_in, body_angmom_in,
+                              solver_v, solver_w, solver_inv_inertia, solver_ref_pos, solver_ref_rot, solver_drift_p,
+                              solver_drift_r)
+    elif prepare != 0:
         for k in range(body_count):
             prepare_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, body_checkpoint_start,
-                         body_checkpoint_count, gravity, h, integrator, rotation, reset_reference, make_rows, body_pos_in,
+                         body_checkpoint_count, gravity, h, integrator, rotation, reset_reference, make_rows, from_impact,
+                         body_pos_in,
                          body_rot_in, body_vel_in, body_angmom_in, terrain_contact_active, terrain_contact_point,
                          terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
                          terrain_contact_tangent_impulse, solver_v, solver_w, solver_inv_inertia, solver_rolling,
@@ -400,12 +411,22 @@ def domain_sweep(
                     warm_start_pair_side(p, side, body_inv_mass, pair_body, pair_point_count, pair_normal,
                                          pair_point, pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
                                          solver_ref_pos, solver_v, solver_w)
-    terrain = mode == MODE_SOLVE or mode == MODE_RELAX
+    terrain = mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
     use_bias = int(mode == MODE_SOLVE)
+    if mode == MODE_RELAX_CLOSED:
+        use_bias = -1
     # forward: terrain, then pairs; backward: the same sequence walked from its end
     for part in range(2):
         if (part == 0) == (reverse == 0):
-            if terrain:
+            if mode == MODE_IMPACT:
+                for k in range(body_count):
+                    impact_terrain_body(domain_body[walk(body_first, body_count, k, reverse)], body_inv_mass,
+                                        body_friction, body_restitution, body_checkpoint_start, body_checkpoint_count,
+                                        h, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                                        terrain_contact_normal, terrain_contact_depth, solver_inv_inertia,
+                                        solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w,
+                                        impact_normal, impact_tangent)
+            elif terrain:
                 for k in range(body_count):
                     sweep_body_terrain(domain_body[walk(body_first, body_count, k, reverse)], body_shape, body_size,
                                        body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start,

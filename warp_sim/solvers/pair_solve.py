@@ -8,7 +8,7 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 import warp as wp
 
 from .coloring import color_range
-from .soft_step import restitution_impulse, restitution_stop
+from .impact import impact_pair
 
 wp.set_module_options({"enable_backward": False})
 
@@ -17,8 +17,10 @@ POINTS = 4
 MODE_WARM_START = 0
 MODE_SOLVE = 1
 MODE_RELAX = 2
-MODE_RESTITUTION_STOP = 3
-MODE_RESTITUTION_BOUNCE = 4
+MODE_IMPACT = 3  # impact.py: restitution and impact friction, before the warm start
+# relax of a scene with restitution: open gaps are left to the next substep's impact stage, which
+# bounces them with their full approach speed (a relax impulse would take part of it away)
+MODE_RELAX_CLOSED = 4
 
 
 @wp.struct
@@ -78,6 +80,11 @@ def solve_one_pair(
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
+    if mode == MODE_IMPACT:
+        impact_pair(p, body_inv_mass, body_friction, body_restitution, h, restitution_threshold, pair_body,
+                    pair_point_count, pair_normal, pair_point, pair_depth, solver_inv_inertia, solver_ref_pos,
+                    solver_drift_p, solver_drift_r, solver_v, solver_w)
+        return
     ij = pair_body[p]
     i = ij[0]
     j = ij[1]
@@ -98,7 +105,6 @@ def solve_one_pair(
     vel.vj = solver_v[j]
     vel.wj = solver_w[j]
     friction = wp.sqrt(body_friction[i] * body_friction[j])
-    e = wp.max(body_restitution[i], body_restitution[j])
 
     for k in range(pair_point_count[p]):
         slot = p * POINTS + k
@@ -109,17 +115,6 @@ def solve_one_pair(
         if mode == MODE_WARM_START:
             vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
                                      inv_ij)
-        elif mode == MODE_RESTITUTION_STOP or mode == MODE_RESTITUTION_BOUNCE:
-            extra = float(0.0)
-            if e > 0.0:
-                k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-                if mode == MODE_RESTITUTION_STOP:
-                    extra = restitution_stop(acc, wp.dot(relative_velocity(vel, ri, rj), n), k_n)
-                else:
-                    extra = restitution_impulse(acc, k_n, e, restitution_threshold)
-            if extra > 0.0:
-                pair_normal_impulse[slot] = acc + extra
-                vel = apply_pair_impulse(vel, extra * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
         else:
             # the gap found at the reference pose, grown by how far the anchors have moved apart
             moved = (drift_pi + drift_ri * ri) - (drift_pj + drift_rj * rj)
@@ -129,6 +124,8 @@ def solve_one_pair(
             mass_scale = float(1.0)
             impulse_scale = float(0.0)
             if separation > 0.0:
+                if mode == MODE_RELAX_CLOSED:
+                    continue
                 bias = separation / h
             elif mode == MODE_SOLVE:
                 bias = wp.max(soft[0] * separation, -max_push_velocity)

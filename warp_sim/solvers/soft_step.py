@@ -2,6 +2,7 @@
 
 Per substep h, for each body (SEED.md 3 gives the impulse algebra, Baraff's j formula):
 
+    0. impact        bounce and impact friction of the contacts closing fast (impact.py)
     1. pre-kick      v* = v + alpha g h                   (alpha from the integrator)
     2. warm start    re-apply last substep's accumulated impulses (slot = persistent identity)
     3. solve         up to `iterations` Gauss-Seidel sweeps with the soft bias (push-out); a body
@@ -9,10 +10,10 @@ Per substep h, for each body (SEED.md 3 gives the impulse algebra, Baraff's j fo
     4. integrate     x' = x + h v*, orientation by the integrator's scheme
     5. relax         `relax_iterations` sweeps without bias: the push-out velocity moved the body
                      out of the terrain but is removed here, so correcting penetration adds no energy
-    6. restitution   engaged contacts still closing are stopped; then those whose impulse changed
-                     the velocity by more than the threshold get e times their compression
-                     impulse again (Poisson's hypothesis, see ``restitution_impulse``)
     7. post-kick     v' = v* + (1 - alpha) g h
+
+Restitution is not part of the solve: impacts (contacts closing faster than the restitution
+threshold) are resolved before the warm start, on the velocity the last solve left (impact.py).
 
 Normal impulse with accumulation and clamping (Catto's sequential impulses):
 
@@ -41,6 +42,7 @@ import warp as wp
 
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
+from .impact import impact_terrain
 
 
 def soft_coefficients(h: float, contact_hertz: float, damping_ratio: float) -> wp.vec3:
@@ -119,8 +121,12 @@ def solve_terrain_contact(
     mass_scale = float(1.0)
     impulse_scale = float(0.0)
     if separation > 0.0:
+        if use_bias < 0:
+            # relax of a scene with restitution: an open gap is left to the next substep's impact
+            # stage, which bounces it with its full approach speed (impact.py)
+            return vel
         bias = separation / h
-    elif use_bias != 0:
+    elif use_bias > 0:
         bias = wp.max(soft[0] * separation, -max_push_velocity)
         mass_scale = soft[1]
         impulse_scale = soft[2]
@@ -220,35 +226,6 @@ def sweep(
 
 
 @wp.func
-def restitution_stop(accumulated: float, vn: float, k_n: float) -> float:
-    """First restitution pass: a contact that took impulse but is still closing (the relax
-    sweep allows a speculative approach of gap / h) is stopped, so its accumulated impulse
-    becomes the whole compression impulse J_c of the impact."""
-    if accumulated > 0.0 and vn < 0.0:
-        return -vn / k_n
-    return 0.0
-
-
-@wp.func
-def restitution_impulse(accumulated: float, k_n: float, e: float, threshold: float) -> float:
-    """Second restitution pass (Poisson's hypothesis): e times the compression impulse J_c.
-
-    A contact takes part when J_c k_n, the velocity change its impulse made, exceeds the
-    restitution threshold: resting contacts (J_c k_n ~ g h) do not bounce, while every contact of
-    an impact chain does, including those that started at rest.
-
-    Why not Box2D's velocity target v_n = -e v_n(approach)?  It is exact for one contact but
-    wrong for simultaneous impacts: in a row of touching balls (Newton's cradle) the solve has
-    already spread the momentum down the row when contact 1-2 is re-targeted, and the row gains
-    energy (2 J became 4.9 J in a five-ball test).  Fixed impulses e J_c on every contact commute,
-    conserve momentum and, for e <= 1, add no energy; for one contact they are the velocity rule.
-    """
-    if accumulated * k_n > threshold:
-        return e * accumulated
-    return 0.0
-
-
-@wp.func
 def warm_start_terrain(
     start: int,
     count: int,
@@ -268,40 +245,6 @@ def warm_start_terrain(
             n = terrain_contact_normal[slot]
             warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
             vel = apply_impulse(vel, warm, terrain_contact_point[slot] - x, inv_mass, inv_inertia)
-    return vel
-
-
-@wp.func
-def restitution_pass(
-    phase: int,
-    start: int,
-    count: int,
-    x: wp.vec3,
-    vel: BodyVelocity,
-    inv_mass: float,
-    inv_inertia: wp.mat33,
-    e: float,
-    restitution_threshold: float,
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_normal_impulse: wp.array(dtype=float),
-) -> BodyVelocity:
-    """Phase 0 stops every engaged terrain contact still closing; phase 1 adds the bounces."""
-    for slot in range(start, start + count):
-        acc = terrain_contact_normal_impulse[slot]
-        if terrain_contact_active[slot] != 0 and acc > 0.0:
-            n = terrain_contact_normal[slot]
-            arm = terrain_contact_point[slot] - x
-            rn = wp.cross(arm, n)
-            k_n = inv_mass + wp.dot(rn, inv_inertia * rn)
-            extra = float(0.0)
-            if phase == 0:
-                extra = restitution_stop(acc, wp.dot(vel.v + wp.cross(vel.w, arm), n), k_n)
-            else:
-                extra = restitution_impulse(acc, k_n, e, restitution_threshold)
-            terrain_contact_normal_impulse[slot] = acc + extra
-            vel = apply_impulse(vel, extra * n, arm, inv_mass, inv_inertia)
     return vel
 
 
@@ -346,6 +289,9 @@ def solve_and_integrate(
     terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    # Scratch
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
     # State in
     body_pos_in: wp.array(dtype=wp.vec3),
     body_quat_in: wp.array(dtype=wp.quat),
@@ -391,16 +337,26 @@ def solve_and_integrate(
     if body_shape[i] == SHAPE_SPHERE:
         rolling = body_rolling_resistance[i] * body_size[i][0]
 
-    # Warm start
     touching = int(0)
     for slot in range(start, start + count):
         touching = touching | terrain_contact_active[slot]
+    zero = wp.vec3(0.0)
+    no_turn = wp.mat33(0.0)
+    e = body_restitution[i]
+    if touching != 0 and e > 0.0:
+        # impacts act on the velocity the last solve left, without this substep's gravity
+        v_last = body_vel_in[i] - ((1.0 - alpha) * h) * gravity
+        vw = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
+                            h, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                            terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
+        vel.v = wp.spatial_bottom(vw) + h * gravity
+        vel.w = wp.spatial_top(vw)
+
+    # Warm start
     vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, terrain_contact_active,
                              terrain_contact_point, terrain_contact_normal, terrain_contact_normal_impulse,
                              terrain_contact_tangent_impulse)
 
-    zero = wp.vec3(0.0)
-    no_turn = wp.mat33(0.0)
     reach = body_size[i][0]
     if body_shape[i] != SHAPE_SPHERE:
         reach = wp.length(body_size[i])
@@ -422,24 +378,17 @@ def solve_and_integrate(
     q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], new_angmom, h, integrator, rotation)
 
     if touching != 0:
+        relax_bias = wp.where(e > 0.0, -1, 0)
         shift_v = h * vel.v
         shift_r = drift_rotation(body_shape[i], rot_new, rot)
         for _it in range(relax_iterations):
             before = vel
-            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 0,
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, relax_bias,
                                 soft, max_push_velocity, shift_v, shift_r, terrain_contact_active, terrain_contact_point,
                                 terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
                                 terrain_contact_tangent_impulse)
             if sweep_converged(before, vel, reach, convergence_tolerance):
                 break
-        # Restitution: stop every engaged contact, then bounce them all (two passes, see
-        # restitution_impulse for why they must not be interleaved)
-        e = body_restitution[i]
-        if e > 0.0:
-            for phase in range(2):
-                vel = restitution_pass(phase, start, count, x, vel, inv_mass, inv_inertia, e, restitution_threshold,
-                                       terrain_contact_active, terrain_contact_point, terrain_contact_normal,
-                                       terrain_contact_normal_impulse)
         new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
 
     v_new = vel.v + ((1.0 - alpha) * h) * gravity

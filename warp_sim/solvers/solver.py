@@ -18,11 +18,11 @@ from .coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
-from .pair_solve import (MODE_RELAX, MODE_RESTITUTION_BOUNCE, MODE_RESTITUTION_STOP, MODE_SOLVE,
-                         MODE_WARM_START, pair_pass)
+from .impact import IMPACT_SWEEPS, impact_begin, terrain_impact
+from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, pair_pass
 from .soft_step import soft_coefficients, solve_and_integrate
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
-                     terrain_restitution, terrain_sweep)
+                     terrain_sweep)
 
 
 @dataclass
@@ -110,6 +110,15 @@ class SoftStepSolver:
             self.terrain_row_count = wp.zeros(max(model.body_count, 1), dtype=wp.int32, device=self.device)
         return self.terrain_row, self.terrain_row_count
 
+    def _impact_scratch(self, contacts):
+        """Per terrain slot: the impact's normal and tangential impulses (impact.py)."""
+        slots = max(contacts.terrain_contact_active.shape[0], 1)
+        normal = getattr(self, "impact_normal", None)
+        if normal is None or normal.shape[0] < slots:
+            self.impact_normal = wp.zeros(slots, dtype=float, device=self.device)
+            self.impact_tangent = wp.zeros(slots, dtype=wp.vec3, device=self.device)
+        return self.impact_normal, self.impact_tangent
+
     def _site(self, state, *name):
         """The recorded-launch owner for this call site and this input state.  The two state buffers
         alternate, so a site keyed by both keeps its arguments unchanged from one use to the next:
@@ -126,11 +135,11 @@ class SoftStepSolver:
     def _make_rows(self) -> int:
         return MAKE_ROWS if self.reuse_isotropic_rows else MAKE_ROWS_ALWAYS
 
-    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool):
+    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool, from_impact: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
             self.gravity, dt, integrator, ROTATIONS[self.settings.rotation], int(fresh_contacts),
-            self._make_rows() if make_rows else MAKE_ROWS_NONE,
+            self._make_rows() if make_rows else MAKE_ROWS_NONE, int(from_impact),
             state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
             c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
@@ -166,6 +175,8 @@ class SoftStepSolver:
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
                 contacts.terrain_contact_tangent_impulse,
+                # Scratch
+                *self._impact_scratch(contacts),
                 # State in
                 *state_in.fields(),
                 # State out
@@ -184,13 +195,22 @@ class SoftStepSolver:
             state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
             body_bad_step, bad_count], device=self.device)
 
-    def _restitution_terrain(self, m, c, phase: int):
-        launch(terrain_restitution, m.body_count, key=self, inputs=[
-            m.body_inv_mass, m.body_restitution, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.settings.restitution_threshold, phase,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-            c.terrain_contact_normal_impulse,
-            self.solver_inv_inertia, self.solver_ref_pos, self.solver_v, self.solver_w], device=self.device)
+    def _impacts(self, m, c, state_in, dt, integrator, fresh_contacts, pairs):
+        """The impact stage (impact.py): velocities without this substep's gravity, then
+        IMPACT_SWEEPS sweeps of terrain and pair impacts.  A scene without restitution skips it."""
+        launch(impact_begin, m.body_count, key=self, inputs=[
+            m.body_inv_mass, m.body_inv_inertia, self.gravity, dt, integrator, ROTATIONS[self.settings.rotation],
+            int(fresh_contacts), state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
+            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_ref_pos, self.solver_ref_rot,
+            self.solver_drift_p, self.solver_drift_r], device=self.device)
+        for _ in range(IMPACT_SWEEPS):
+            launch(terrain_impact, m.body_count, key=self, inputs=[
+                m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
+                m.body_checkpoint_count, dt, self.settings.restitution_threshold,
+                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
+                self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+                self.solver_v, self.solver_w, *self._impact_scratch(c)], device=self.device)
+            pairs(MODE_IMPACT)
 
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
                      fresh_contacts, domains=None):
@@ -204,8 +224,6 @@ class SoftStepSolver:
         integrator = INTEGRATORS[s.integrator]
         soft = self._soft(dt)
         dev = self.device
-
-        self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True)
 
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[
@@ -231,19 +249,17 @@ class SoftStepSolver:
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
                     self.solver_v, self.solver_w], device=dev)
 
+        if m.has_restitution:
+            self._impacts(m, c, state_in, dt, integrator, fresh_contacts, pairs)
+        self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, m.has_restitution)
         pairs(MODE_WARM_START)
         for _ in range(s.iterations):
             terrain(1)
             pairs(MODE_SOLVE)
         self._integrate_positions(m, state_in, state_out, dt, integrator)
         for _ in range(s.relax_iterations):
-            terrain(0)
-            pairs(MODE_RELAX)
-        # a scene without restitution pays for no restitution passes
-        phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
-        for phase, mode in phases:
-            self._restitution_terrain(m, c, phase)
-            pairs(mode)
+            terrain(-1 if m.has_restitution else 0)
+            pairs(MODE_RELAX_CLOSED if m.has_restitution else MODE_RELAX)
         self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
     def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g):
@@ -269,11 +285,13 @@ class SoftStepSolver:
         integrator = INTEGRATORS[s.integrator]
         rotation = ROTATIONS[s.rotation]
         dev = self.device
+        impacts = m.has_restitution
         shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair, g.body_domain,
                   g.body_on_boundary, g.boundary_body_count, g.boundary_body,
                   m.body_shape, m.body_size, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, m.body_friction,
                   m.body_restitution, m.body_rolling_resistance, m.body_checkpoint_start, m.body_checkpoint_count,
-                  self.gravity, dt, integrator, rotation, int(fresh_contacts), self._make_rows(), self._soft(dt),
+                  self.gravity, dt, integrator, rotation, int(fresh_contacts), self._make_rows(), int(impacts),
+                  self._soft(dt),
                   s.max_push_velocity,
                   s.restitution_threshold, self.sim_step,
                   state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
@@ -283,7 +301,7 @@ class SoftStepSolver:
                   c.pair_normal_impulse, c.pair_tangent_impulse,
                   self.solver_v, self.solver_w, self.solver_w0, self.solver_inv_inertia, self.solver_rolling,
                   self.solver_shift_v, self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
-                  self.solver_drift_p, self.solver_drift_r, *self._terrain_rows(m, c),
+                  self.solver_drift_p, self.solver_drift_r, *self._terrain_rows(m, c), *self._impact_scratch(c),
                   state_out.body_pos, state_out.body_quat, state_out.body_rot, state_out.body_vel,
                   state_out.body_angmom, body_bad_step, bad_count]
 
@@ -300,20 +318,18 @@ class SoftStepSolver:
             launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
         iterations, relax = s.iterations, s.relax_iterations
-        fuse_finalize = relax > 0 and not m.has_restitution
+        fuse_finalize = relax > 0
+        # a scene without restitution pays for no impact sweeps (impact.py)
+        for k in range(IMPACT_SWEEPS if impacts else 0):
+            sweep(MODE_IMPACT, k % 2, prepare=int(k == 0))
         if iterations == 0:
-            self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True)
+            self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, impacts)
             sweep(MODE_WARM_START, 0)
             self._integrate_positions(m, state_in, state_out, dt, integrator)
         for k in range(iterations):
             sweep(MODE_SOLVE, k % 2, prepare=int(k == 0), integrate=int(k == iterations - 1))
         for k in range(relax):
-            sweep(MODE_RELAX, 1, finalize=int(k == relax - 1 and fuse_finalize))
-        # a scene without restitution pays for no restitution passes
-        phases = ((0, MODE_RESTITUTION_STOP), (1, MODE_RESTITUTION_BOUNCE)) if m.has_restitution else ()
-        for phase, mode in phases:
-            self._restitution_terrain(m, c, phase)
-            sweep(mode, 0)
+            sweep(MODE_RELAX_CLOSED if impacts else MODE_RELAX, 1, finalize=int(k == relax - 1))
         if not fuse_finalize:
             self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
@@ -324,7 +340,7 @@ class SoftStepSolver:
         n = m.body_count
         integrator = INTEGRATORS[s.integrator]
         dev = self.device
-        self._prepare(m, c, state_in, dt, integrator, True, False)
+        self._prepare(m, c, state_in, dt, integrator, True, False, False)
 
         def pairs(position_pass: int):
             for color, size in enumerate(color_sizes):

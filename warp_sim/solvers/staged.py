@@ -37,8 +37,7 @@ import warp as wp
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import TerrainRow, make_terrain_row, solve_terrain_row
-from .soft_step import (BodyVelocity, apply_impulse, drift_rotation, restitution_pass, solve_rolling,
-                        warm_start_terrain)
+from .soft_step import BodyVelocity, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
 
 wp.set_module_options({"enable_backward": False})
 
@@ -66,6 +65,7 @@ def prepare_body(
     rotation: int,
     reset_reference: int,
     make_rows: int,
+    from_impact: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
@@ -116,9 +116,14 @@ def prepare_body(
     if not isotropic:
         inv_inertia = world_inv_inertia(body_rot[i], body_d)
     vel = BodyVelocity()
-    vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
-    vel.w = inv_inertia * body_angmom[i]
-    solver_w0[i] = vel.w
+    solver_w0[i] = inv_inertia * body_angmom[i]
+    if from_impact != 0:
+        # impact.py left the post-impact velocities, without this substep's gravity
+        vel.v = solver_v[i] + h * gravity
+        vel.w = solver_w[i]
+    else:
+        vel.v = body_vel[i] + (pre_kick_fraction(integrator) * h) * gravity
+        vel.w = solver_w0[i]
     x_ref = solver_ref_pos[i]
     start = body_checkpoint_start[i]
     count = body_checkpoint_count[i]
@@ -167,6 +172,7 @@ def prepare_bodies(
     rotation: int,
     reset_reference: int,
     make_rows: int,
+    from_impact: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
@@ -193,7 +199,8 @@ def prepare_bodies(
     terrain_row_count: wp.array(dtype=wp.int32),
 ):
     prepare_body(wp.tid() + tid_offset, body_inv_mass, body_inv_inertia, body_checkpoint_start, body_checkpoint_count,
-                 gravity, h, integrator, rotation, reset_reference, make_rows, body_pos, body_rot, body_vel, body_angmom,
+                 gravity, h, integrator, rotation, reset_reference, make_rows, from_impact, body_pos, body_rot, body_vel,
+                 body_angmom,
                  terrain_contact_active, terrain_contact_point, terrain_contact_normal, terrain_contact_depth,
                  terrain_contact_normal_impulse, terrain_contact_tangent_impulse, solver_v, solver_w, solver_inv_inertia,
                  solver_rolling, solver_w0, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r, terrain_row,
@@ -399,44 +406,6 @@ def integrate_positions(
                    solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r,
                    body_pos_out, body_quat_out, body_rot_out)
 
-
-
-@wp.kernel
-def terrain_restitution(
-    tid_offset: int,
-    # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
-    restitution_threshold: float,
-    phase: int,
-    # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_normal_impulse: wp.array(dtype=float),
-    # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-):
-    i = wp.tid() + tid_offset
-    inv_mass = body_inv_mass[i]
-    e = body_restitution[i]
-    if inv_mass == 0.0 or e == 0.0:
-        return
-    x = solver_ref_pos[i]
-    inv_inertia = solver_inv_inertia[i]
-    vel = BodyVelocity()
-    vel.v = solver_v[i]
-    vel.w = solver_w[i]
-    vel = restitution_pass(phase, body_checkpoint_start[i], body_checkpoint_count[i], x, vel, inv_mass, inv_inertia,
-                           e, restitution_threshold, terrain_contact_active, terrain_contact_point,
-                           terrain_contact_normal, terrain_contact_normal_impulse)
-    solver_v[i] = vel.v
-    solver_w[i] = vel.w
 
 
 @wp.func(inline=True)

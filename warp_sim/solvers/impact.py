@@ -1,0 +1,447 @@
+"""Impacts: restitution and impact friction, resolved before the contact solve of a substep.
+
+Why a stage of its own.  The soft solve (soft_step.py) holds loads and pushes bodies apart; its
+accumulated impulse mixes the impact with the load it holds, the position bias and the warm
+start.  Bouncing by a share of that impulse (the earlier design) bounced resting stacks under
+heavy load, created spin where Gauss-Seidel spread the impulse unevenly over a face, and lost
+energy where it had not converged.  So an impact is solved apart, on the velocities the last
+substep's solve left (this substep's gravity not yet added), and only where a contact closes
+faster than ``restitution_threshold``:
+
+    v-  = v_in - (1 - alpha) g h     (the velocity at the end of the last solve; alpha: integrate.py)
+    resting contacts approach at ~0, so they never bounce, whatever load they hold (g, mass ratio)
+
+Model of one impact (one manifold: the terrain contacts of one body, or the points of one pair)
+is Poisson's hypothesis, solved to convergence:
+
+    compression: impulses P_c >= 0 with v_n(v_c) >= 0 at every engaged point and P_c . v_n = 0
+                 (projected Gauss-Seidel on the manifold's points, IMPACT_ITERATIONS sweeps)
+    restitution: P_r = e P_c at every point
+
+For a frictionless manifold v_c is the M-metric projection of v- onto the non-approaching
+velocities, unique even when P_c is not (four corners of a face), so the result v+ = (1 + e) v_c
+- e v- is symmetric for a symmetric impact (no spin from a flat drop) and its kinetic energy is
+
+    |v+|^2_M = (1 - e^2) |v_c|^2_M + e^2 |v-|^2_M  <=  |v-|^2_M      (equal for e = 1)
+
+because v_c . M (v_c - v-) = P_c . J v_c = 0 at convergence.  Friction of the impact is Coulomb's
+on the whole normal impulse: |P_t| <= mu (1 + e) P_c per point, against the slip left after the
+normal impulses (a sphere hitting a plane at (3, -5) m/s with e = 0.5, mu = 0.1 leaves at
+v_x = 3 - 0.1 * 1.5 * 5 = 2.25).
+
+Between manifolds the impacts propagate in sequence: IMPACT_SWEEPS Gauss-Seidel sweeps over all
+manifolds, alternating direction, each manifold re-tested on the current velocities.  A row of
+touching balls struck at one end is then a chain of two-body impacts: with e = 1 the last ball
+leaves with the striker's velocity and the others stop (Newton's cradle), momentum exactly and
+kinetic energy to rounding kept; two sweeps in opposite directions carry a straight chain in
+either body order.  A chain that needs more sweeps than IMPACT_SWEEPS leaves the rest of its
+approach to the soft solve, which stops it inelastically (energy can only be lost).
+
+A contact whose gap is still open is engaged when it would close within the substep
+(gap + h v_n < 0); it is stopped and bounced there, at most h |v_n| early.
+"""
+
+import warp as wp
+
+from ..integrate import pre_kick_fraction, world_inv_inertia
+from ..types import ROTATION_MATRIX
+
+wp.set_module_options({"enable_backward": False})
+
+POINTS = 4
+# Gauss-Seidel sweeps over one manifold's points.  Four points of a face converge geometrically;
+# 16 sweeps leave a flat-dropped cube's spin under 1e-4 of its bounce speed per metre.
+IMPACT_ITERATIONS = 16
+# Sweeps over all manifolds of a substep (alternating direction): enough for straight chains
+# in either order, with two to spare for branching piles.
+IMPACT_SWEEPS = 4
+NOT_ENGAGED = -1.0
+
+
+@wp.func
+def body_inv_inertia_world(rot: wp.mat33, body_d: wp.vec3, rotation: int) -> wp.mat33:
+    """R I^-1 R^T, taken as exactly d 1 for an isotropic body (sphere, cube) unless the rotation is
+    the raw matrix mode (its R drifts from orthonormal by design); staged.prepare_body says why."""
+    if rotation != ROTATION_MATRIX and body_d[0] == body_d[1] and body_d[1] == body_d[2]:
+        return wp.diag(body_d)
+    return world_inv_inertia(rot, body_d)
+
+
+@wp.func
+def impact_begin_body(
+    i: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    # Settings
+    gravity: wp.vec3,
+    h: float,
+    integrator: int,
+    rotation: int,
+    reset_reference: int,
+    # State in
+    body_pos: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.mat33),
+    body_vel: wp.array(dtype=wp.vec3),
+    body_angmom: wp.array(dtype=wp.vec3),
+    # Solver out
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+):
+    """The velocities the impacts act on: those the last solve left, without this substep's
+    gravity (prepare_body adds it back, and the contact solve then holds it as a load)."""
+    if reset_reference != 0:
+        solver_ref_pos[i] = body_pos[i]
+        solver_ref_rot[i] = body_rot[i]
+        solver_drift_p[i] = wp.vec3(0.0)
+        solver_drift_r[i] = wp.mat33(0.0)
+    if body_inv_mass[i] == 0.0:
+        solver_v[i] = wp.vec3(0.0)
+        solver_w[i] = wp.vec3(0.0)
+        solver_inv_inertia[i] = wp.mat33(0.0)
+        return
+    inv_inertia = body_inv_inertia_world(body_rot[i], body_inv_inertia[i], rotation)
+    solver_inv_inertia[i] = inv_inertia
+    solver_v[i] = body_vel[i] - ((1.0 - pre_kick_fraction(integrator)) * h) * gravity
+    solver_w[i] = inv_inertia * body_angmom[i]
+
+
+@wp.func
+def engaged(gap: float, vn: float, h: float) -> bool:
+    return gap <= 0.0 or gap + h * vn < 0.0
+
+
+@wp.func
+def coulomb_step(old_t: wp.vec3, vt: wp.vec3, k_t: float, limit: float) -> wp.vec3:
+    """The accumulated tangential impulse after pushing against the slip vt, clamped to the disc."""
+    new_t = old_t
+    slip = wp.length(vt)
+    if slip > 1.0e-9:
+        new_t = old_t - (slip / k_t) * (vt / slip)
+    mag = wp.length(new_t)
+    if mag > limit:
+        new_t = new_t * (limit / mag)
+    return new_t
+
+
+@wp.func
+def impact_terrain(
+    start: int,
+    count: int,
+    x: wp.vec3,
+    v: wp.vec3,
+    w: wp.vec3,
+    inv_mass: float,
+    inv_inertia: wp.mat33,
+    drift_p: wp.vec3,
+    drift_r: wp.mat33,
+    e: float,
+    mu: float,
+    h: float,
+    restitution_threshold: float,
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
+) -> wp.spatial_vector:
+    """The impact of one body on the terrain: its engaged terrain contacts (slots start ...
+    start + count, arms from x) are one manifold.  Returns the new (w, v)."""
+    hit = int(0)
+    for slot in range(start, start + count):
+        impact_normal[slot] = NOT_ENGAGED
+        if terrain_contact_active[slot] != 0:
+            n = terrain_contact_normal[slot]
+            arm = terrain_contact_point[slot] - x
+            gap = -terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
+            vn = wp.dot(v + wp.cross(w, arm), n)
+            if engaged(gap, vn, h):
+                impact_normal[slot] = 0.0
+                impact_tangent[slot] = wp.vec3(0.0)
+                if vn < -restitution_threshold:
+                    hit = 1
+    if hit == 0:
+        return wp.spatial_vector(w, v)
+    # compression: no engaged point approaches
+    for _it in range(IMPACT_ITERATIONS):
+        for slot in range(start, start + count):
+            acc = impact_normal[slot]
+            if acc >= 0.0:
+                n = terrain_contact_normal[slot]
+                arm = terrain_contact_point[slot] - x
+                rn = wp.cross(arm, n)
+                vn = wp.dot(v + wp.cross(w, arm), n)
+                new_acc = wp.max(acc - vn / (inv_mass + wp.dot(rn, inv_inertia * rn)), 0.0)
+                impact_normal[slot] = new_acc
+                v = v + (inv_mass * (new_acc - acc)) * n
+                w = w + inv_inertia * (rn * (new_acc - acc))
+    # restitution: e times each point's compression impulse
+    for slot in range(start, start + count):
+        acc = impact_normal[slot]
+        if acc > 0.0:
+            n = terrain_contact_normal[slot]
+            rn = wp.cross(terrain_contact_point[slot] - x, n)
+            v = v + (inv_mass * e * acc) * n
+            w = w + inv_inertia * (rn * (e * acc))
+    # friction on the whole normal impulse (1 + e) P_c, two sweeps so the points share it
+    if mu > 0.0:
+        for _it in range(2):
+            for slot in range(start, start + count):
+                acc = impact_normal[slot]
+                if acc > 0.0:
+                    n = terrain_contact_normal[slot]
+                    arm = terrain_contact_point[slot] - x
+                    vp = v + wp.cross(w, arm)
+                    vt = vp - wp.dot(vp, n) * n
+                    old_t = impact_tangent[slot]
+                    k_t = inv_mass
+                    slip = wp.length(vt)
+                    if slip > 1.0e-9:
+                        rt = wp.cross(arm, vt / slip)
+                        k_t = inv_mass + wp.dot(rt, inv_inertia * rt)
+                    new_t = coulomb_step(old_t, vt, k_t, mu * (1.0 + e) * acc)
+                    impact_tangent[slot] = new_t
+                    v = v + inv_mass * (new_t - old_t)
+                    w = w + inv_inertia * wp.cross(arm, new_t - old_t)
+    return wp.spatial_vector(w, v)
+
+
+@wp.func
+def impact_terrain_body(
+    i: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
+    h: float,
+    restitution_threshold: float,
+    # Contacts in
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
+):
+    inv_mass = body_inv_mass[i]
+    e = body_restitution[i]
+    if inv_mass == 0.0 or e == 0.0:
+        return
+    vw = impact_terrain(body_checkpoint_start[i], body_checkpoint_count[i], solver_ref_pos[i], solver_v[i],
+                        solver_w[i], inv_mass, solver_inv_inertia[i], solver_drift_p[i], solver_drift_r[i], e,
+                        body_friction[i], h, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                        terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
+    solver_w[i] = wp.spatial_top(vw)
+    solver_v[i] = wp.spatial_bottom(vw)
+
+
+@wp.func
+def impact_pair(
+    p: int,
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    # Settings
+    h: float,
+    restitution_threshold: float,
+    # Contacts in
+    pair_body: wp.array(dtype=wp.vec2i),
+    pair_point_count: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
+    # Solver in/out
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    """The impact of pair p (its manifold's points; the algebra of pair_solve.py, impulse +P on i)."""
+    ij = pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    e = wp.max(body_restitution[i], body_restitution[j])
+    count = pair_point_count[p]
+    if e == 0.0 or count == 0:
+        return
+    inv_mi = body_inv_mass[i]
+    inv_mj = body_inv_mass[j]
+    if inv_mi == 0.0 and inv_mj == 0.0:
+        return
+    n = pair_normal[p]
+    xi = solver_ref_pos[i]
+    xj = solver_ref_pos[j]
+    moved_pi = solver_drift_p[i]
+    moved_pj = solver_drift_p[j]
+    drift_ri = solver_drift_r[i]
+    drift_rj = solver_drift_r[j]
+    inv_ii = solver_inv_inertia[i]
+    inv_ij = solver_inv_inertia[j]
+    vi = solver_v[i]
+    wi = solver_w[i]
+    vj = solver_v[j]
+    wj = solver_w[j]
+    acc = wp.vec4(NOT_ENGAGED)
+    hit = int(0)
+    for k in range(count):
+        point = pair_point[p * POINTS + k]
+        ri = point - xi
+        rj = point - xj
+        gap = -pair_depth[p * POINTS + k] + wp.dot((moved_pi + drift_ri * ri) - (moved_pj + drift_rj * rj), n)
+        vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
+        if engaged(gap, vn, h):
+            acc[k] = 0.0
+            if vn < -restitution_threshold:
+                hit = 1
+    if hit == 0:
+        return
+    for _it in range(IMPACT_ITERATIONS):
+        for k in range(count):
+            if acc[k] >= 0.0:
+                point = pair_point[p * POINTS + k]
+                ri = point - xi
+                rj = point - xj
+                rni = wp.cross(ri, n)
+                rnj = wp.cross(rj, n)
+                k_n = inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
+                vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
+                new_acc = wp.max(acc[k] - vn / k_n, 0.0)
+                d = new_acc - acc[k]
+                acc[k] = new_acc
+                vi = vi + (inv_mi * d) * n
+                wi = wi + inv_ii * (rni * d)
+                vj = vj - (inv_mj * d) * n
+                wj = wj - inv_ij * (rnj * d)
+    for k in range(count):
+        if acc[k] > 0.0:
+            point = pair_point[p * POINTS + k]
+            bounce = e * acc[k]
+            vi = vi + (inv_mi * bounce) * n
+            wi = wi + inv_ii * (wp.cross(point - xi, n) * bounce)
+            vj = vj - (inv_mj * bounce) * n
+            wj = wj - inv_ij * (wp.cross(point - xj, n) * bounce)
+    mu = wp.sqrt(body_friction[i] * body_friction[j])
+    if mu > 0.0:
+        t0 = wp.vec3(0.0)
+        t1 = wp.vec3(0.0)
+        t2 = wp.vec3(0.0)
+        t3 = wp.vec3(0.0)
+        for _it in range(2):
+            for k in range(count):
+                if acc[k] > 0.0:
+                    point = pair_point[p * POINTS + k]
+                    ri = point - xi
+                    rj = point - xj
+                    vr = vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj)
+                    vt = vr - wp.dot(vr, n) * n
+                    old_t = t0
+                    if k == 1:
+                        old_t = t1
+                    elif k == 2:
+                        old_t = t2
+                    elif k == 3:
+                        old_t = t3
+                    k_t = inv_mi + inv_mj
+                    slip = wp.length(vt)
+                    if slip > 1.0e-9:
+                        c = vt / slip
+                        rti = wp.cross(ri, c)
+                        rtj = wp.cross(rj, c)
+                        k_t = k_t + wp.dot(rti, inv_ii * rti) + wp.dot(rtj, inv_ij * rtj)
+                    new_t = coulomb_step(old_t, vt, k_t, mu * (1.0 + e) * acc[k])
+                    if k == 0:
+                        t0 = new_t
+                    elif k == 1:
+                        t1 = new_t
+                    elif k == 2:
+                        t2 = new_t
+                    else:
+                        t3 = new_t
+                    dt_imp = new_t - old_t
+                    vi = vi + inv_mi * dt_imp
+                    wi = wi + inv_ii * wp.cross(ri, dt_imp)
+                    vj = vj - inv_mj * dt_imp
+                    wj = wj - inv_ij * wp.cross(rj, dt_imp)
+    # only dynamic bodies are written: a static body may sit in many pairs of one colour
+    if inv_mi > 0.0:
+        solver_v[i] = vi
+        solver_w[i] = wi
+    if inv_mj > 0.0:
+        solver_v[j] = vj
+        solver_w[j] = wj
+
+
+@wp.kernel
+def impact_begin(
+    tid_offset: int,
+    body_inv_mass: wp.array(dtype=float),
+    body_inv_inertia: wp.array(dtype=wp.vec3),
+    gravity: wp.vec3,
+    h: float,
+    integrator: int,
+    rotation: int,
+    reset_reference: int,
+    body_pos: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.mat33),
+    body_vel: wp.array(dtype=wp.vec3),
+    body_angmom: wp.array(dtype=wp.vec3),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_ref_rot: wp.array(dtype=wp.mat33),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+):
+    impact_begin_body(wp.tid() + tid_offset, body_inv_mass, body_inv_inertia, gravity, h, integrator, rotation,
+                      reset_reference, body_pos, body_rot, body_vel, body_angmom, solver_v, solver_w,
+                      solver_inv_inertia, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r)
+
+
+@wp.kernel
+def terrain_impact(
+    tid_offset: int,
+    body_inv_mass: wp.array(dtype=float),
+    body_friction: wp.array(dtype=float),
+    body_restitution: wp.array(dtype=float),
+    body_checkpoint_start: wp.array(dtype=wp.int32),
+    body_checkpoint_count: wp.array(dtype=wp.int32),
+    h: float,
+    restitution_threshold: float,
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    solver_inv_inertia: wp.array(dtype=wp.mat33),
+    solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
+):
+    impact_terrain_body(wp.tid() + tid_offset, body_inv_mass, body_friction, body_restitution, body_checkpoint_start,
+                        body_checkpoint_count, h, restitution_threshold, terrain_contact_active,
+                        terrain_contact_point, terrain_contact_normal, terrain_contact_depth, solver_inv_inertia,
+                        solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w, impact_normal,
+                        impact_tangent)
