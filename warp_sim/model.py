@@ -46,6 +46,9 @@ class Model:
         self.body_restitution = arr("body_restitution", float)
         self.body_friction = arr("body_friction", float)
         self.body_rolling_resistance = arr("body_rolling_resistance", float)
+        # c_r r of a sphere (its rolling-resistance torque per unit normal impulse), 0 for a box
+        rolling_arm = np.where(host["body_shape"] == 0, host["body_rolling_resistance"] * host["body_size"][:, 0], 0.0)
+        self.body_rolling_arm = wp.array(rolling_arm.astype(np.float32), dtype=float, device=device)
         self.has_restitution = bool(np.any(host["body_restitution"] > 0.0))
         self.body_checkpoint_start = arr("body_checkpoint_start", wp.int32)
         self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)

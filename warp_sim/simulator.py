@@ -133,15 +133,15 @@ class Simulator:
         capacity = 0
         if config.body_contact and model.body_count >= 2 and dynamic >= 1:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
-            # with the slab schedule only sleeping (neighbour timers) and push-out still walk colours
+            # with the slab schedule only push-out still walks colours
             self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device,
-                                             self._domain_count(config),
-                                             colors=config.sleep or config.solver == "pushout")
+                                             self._domain_count(config), colors=config.solver == "pushout")
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
         self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.step_count = 0
+        self._gravity_magnitude = float(np.linalg.norm(config.gravity))
         self.graph = None
         self.profile = False  # when set, step() records per-stage wall time in stage_times [s]
         self.stage_times: dict[str, float] = {}
@@ -215,7 +215,7 @@ class Simulator:
         else:
             self._simulate_one_step_collide_each_substep()
         if self.sleep is not None:
-            self._stage("sleep", self.sleep.update, self.states[0], self.config.dt, self.contacts, self._color_sizes)
+            self._stage("sleep", self.sleep.update, self.states[0], self.config.dt, self.contacts)
         wp.launch(advance_step_counter, dim=1, inputs=[self.solver.sim_step], device=self.device)
 
     def _simulate_one_step_collide_once(self):
@@ -224,15 +224,28 @@ class Simulator:
         margin = self.config.speculative_margin
         # the speculative windows cover the whole step: terrain slots open while the gap is
         # closable within dt, pairs are found with bounds swept over dt
-        self._stage("terrain", self.collide, self.states[0], self.contacts, dt, margin)
-        color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts, margin, dt)
-        self._color_sizes = color_sizes
+        color_sizes = self._collide_pass(dt, margin, dt)
         for k in range(self.config.substeps):
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule())
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._stage("solve", self.pairs.store, self.contacts)
         self._keep_output_buffer()
+
+    def _collide_pass(self, h: float, margin: float, sweep_time: float):
+        """Terrain and pair collision of states[0]; with sleeping on, the sleepers an awake body
+        touches are woken and, only then, the pass is run again with them awake (sleep.py).
+        Returns the colour sizes of the pairs."""
+        def collide():
+            self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin)
+            if self.pairs is not None:
+                self._color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts, margin,
+                                                sweep_time, self._gravity_magnitude)
+
+        collide()
+        if self.sleep is not None and self.pairs is not None:
+            self._stage("sleep", self.sleep.wake_touched, self.contacts, collide)
+        return self._color_sizes if self.pairs is not None else None
 
     def _keep_output_buffer(self):
         if self.config.substeps % 2 == 1:
@@ -243,14 +256,8 @@ class Simulator:
     def _simulate_one_step_collide_each_substep(self):
         h = self.substep_dt
         for _ in range(self.config.substeps):
-            self._stage("terrain", self.collide, self.states[0], self.contacts, h, self.config.speculative_margin)
-            color_sizes = None
-            domains = None
-            if self.pairs is not None:
-                color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts,
-                                          self.config.speculative_margin, h)
-                self._color_sizes = color_sizes
-                domains = self.pairs.domain_schedule()
+            color_sizes = self._collide_pass(h, self.config.speculative_margin, h)
+            domains = self.pairs.domain_schedule() if self.pairs is not None else None
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, True, domains)
             if self.pairs is not None:
@@ -350,6 +357,7 @@ class Simulator:
             if not hasattr(self.config, key):
                 raise ValueError(f"unknown simulation setting {key!r}")
             setattr(self.config, key, value)
+        self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
         self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device,
                                      self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))

@@ -13,8 +13,15 @@ A sleeping body counts as static for the rest of the pipeline (inverse mass 0 in
 kernels read), so terrain contact, broad phase, narrow phase and solver all skip it: that is
 where the saving comes from.  Its velocity is zeroed when it falls asleep.
 
-Neighbour timers come from the last substep's contact pairs, gathered colour by colour, so no
-two threads write one body.
+* a sleeping body that an awake one touches wakes before the solve of that same step (Box2D
+  wakes an island when one of its contacts begins touching): the pairs are found, the touched
+  sleepers marked and woken, and the collision pass is run again, so the woken bodies' terrain
+  contacts and their pairs with other sleepers take part in the step.  That second pass runs only
+  in steps where something woke (a device flag, ``wp.capture_if``: no host read).  A woken body's
+  other sleeping neighbours act as static for that step and wake through the timers at its end.
+
+Neighbour timers come from the last substep's contact pairs, one thread per pair, the minimum
+taken with atomics (the same result whatever the order).
 """
 
 from __future__ import annotations
@@ -23,7 +30,6 @@ import numpy as np
 import warp as wp
 
 from .launch import launch
-from .solvers.coloring import COLOR_COUNT, color_range
 
 wp.set_module_options({"enable_backward": False})
 
@@ -33,26 +39,78 @@ NO_NEIGHBOUR = 1.0e30
 @wp.kernel
 def gather_neighbour_timers(
     tid_offset: int,
-    color: int,
-    color_start: wp.array(dtype=wp.int32),
-    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Contacts in
+    pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
+    # Model
     body_inv_mass: wp.array(dtype=float),
+    # Sleep in/out
     body_sleep_timer: wp.array(dtype=float),
     body_neighbour_timer: wp.array(dtype=float),
 ):
-    r = color_range(color, color_start, wp.tid() + tid_offset)
-    for index in range(r[0], r[1]):
-        p = color_pairs_sorted[index]
-        if pair_point_count[p] > 0:
-            ij = pair_body[p]
-            i = ij[0]
-            j = ij[1]
-            if body_inv_mass[j] > 0.0:
-                body_neighbour_timer[i] = wp.min(body_neighbour_timer[i], body_sleep_timer[j])
-            if body_inv_mass[i] > 0.0:
-                body_neighbour_timer[j] = wp.min(body_neighbour_timer[j], body_sleep_timer[i])
+    """One thread per pair slot (past the live count: return).  The minimum is taken with
+    atomics: its result does not depend on the order the threads arrive in."""
+    p = wp.tid() + tid_offset
+    if p >= pair_count[0] or pair_point_count[p] == 0:
+        return
+    ij = pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    if body_inv_mass[j] > 0.0:
+        wp.atomic_min(body_neighbour_timer, i, body_sleep_timer[j])
+    if body_inv_mass[i] > 0.0:
+        wp.atomic_min(body_neighbour_timer, j, body_sleep_timer[i])
+
+
+@wp.kernel
+def mark_touched_sleepers(
+    tid_offset: int,
+    # Contacts in
+    pair_count: wp.array(dtype=wp.int32),
+    pair_body: wp.array(dtype=wp.vec2i),
+    pair_point_count: wp.array(dtype=wp.int32),
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    # Settings
+    sleep_time: float,
+    # Sleep in
+    body_inv_mass_awake: wp.array(dtype=float),
+    body_sleep_timer: wp.array(dtype=float),
+    # Out
+    body_wake: wp.array(dtype=wp.int32),
+    woken: wp.array(dtype=wp.int32),
+):
+    """A sleeping body in a pair with an awake dynamic body that is moving (its timer short of
+    sleep_time: the same test as the neighbour rule of update_sleep, so a pile falling asleep body
+    by body is not woken by its own still members) is to wake before this step's solve.  Reads
+    only the state of the step's start, writes by atomic max: race-free."""
+    p = wp.tid() + tid_offset
+    if p >= pair_count[0] or pair_point_count[p] == 0:
+        return
+    ij = pair_body[p]
+    for side in range(2):
+        b = ij[side]
+        other = ij[1 - side]
+        moving = body_inv_mass_awake[other] > 0.0 and body_sleep_timer[other] < sleep_time
+        if body_inv_mass[b] > 0.0 and body_inv_mass_awake[b] == 0.0 and moving:
+            wp.atomic_max(body_wake, b, 1)
+            wp.atomic_max(woken, 0, 1)
+
+
+@wp.kernel
+def wake_marked(
+    tid_offset: int,
+    body_inv_mass: wp.array(dtype=float),
+    body_wake: wp.array(dtype=wp.int32),
+    body_sleep_timer: wp.array(dtype=float),
+    body_inv_mass_awake: wp.array(dtype=float),
+):
+    i = wp.tid() + tid_offset
+    if body_wake[i] != 0:
+        body_wake[i] = 0
+        body_sleep_timer[i] = 0.0
+        body_inv_mass_awake[i] = body_inv_mass[i]
 
 
 @wp.kernel
@@ -114,17 +172,30 @@ class Sleep:
         self.body_sleep_timer = wp.zeros(n, dtype=float, device=device)
         self.body_neighbour_timer = wp.full(n, NO_NEIGHBOUR, dtype=float, device=device)
         self.body_inv_mass_awake = wp.clone(model.body_inv_mass)
+        self.body_wake = wp.zeros(n, dtype=wp.int32, device=device)
+        self.woken = wp.zeros(1, dtype=wp.int32, device=device)
 
-    def update(self, state, dt: float, contacts=None, color_sizes=None):
+    def wake_touched(self, contacts, recollide):
+        """Before the solve: wake the sleepers that an awake body touches, then, only if any woke,
+        run ``recollide()`` (the collision pass again, now with them awake)."""
+        m = self.model
+        if contacts.pair_max == 0:
+            return
+        self.woken.zero_()
+        launch(mark_touched_sleepers, contacts.pair_max, key=self, inputs=[
+            contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass, self.sleep_time,
+            self.body_inv_mass_awake, self.body_sleep_timer, self.body_wake, self.woken], device=self.device)
+        launch(wake_marked, m.body_count, key=self, inputs=[
+            m.body_inv_mass, self.body_wake, self.body_sleep_timer, self.body_inv_mass_awake], device=self.device)
+        wp.capture_if(self.woken, on_true=recollide)
+
+    def update(self, state, dt: float, contacts=None):
         """After a step: gather neighbour timers over the contact pairs, then decide per body."""
         m = self.model
-        if contacts is not None and color_sizes:
-            for color, size in enumerate(color_sizes):
-                if size:
-                    launch(gather_neighbour_timers, 1 if color == COLOR_COUNT else size, key=self, inputs=[
-                        color, contacts.color_start, contacts.color_pairs_sorted, contacts.pair_body,
-                        contacts.pair_point_count, m.body_inv_mass, self.body_sleep_timer,
-                        self.body_neighbour_timer], device=self.device)
+        if contacts is not None and contacts.pair_max > 0:
+            launch(gather_neighbour_timers, contacts.pair_max, key=self, inputs=[
+                contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass,
+                self.body_sleep_timer, self.body_neighbour_timer], device=self.device)
         launch(update_sleep, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_bound_radius, dt, self.sleep_velocity, self.sleep_time,
             state.body_rot, state.body_vel, state.body_angmom, self.body_sleep_timer, self.body_neighbour_timer,

@@ -57,16 +57,16 @@ class PairContactPipeline:
                                            self.domain_pair, self.body_domain, self.body_on_boundary,
                                            self.boundary_body_count, self.boundary_body)
 
-    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
+    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, gravity: float = 0.0) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
 
         ``sweep_time`` is the time until the next collision pass: each body's bounding sphere
-        grows by how far it can move in it (narrow_phase.swept_reach), so a pair found once
-        per step still covers contacts made late in the step.
+        grows by how far it can move in it (narrow_phase.swept_reach; ``gravity`` is |g|), so a
+        pair found once per step still covers contacts made late in the step.
         """
         m = self.model
         launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
-            m.body_bound_radius, m.body_inv_inertia, float(sweep_time),
+            m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, float(sweep_time), float(gravity),
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
         self.broad.invalidate_radii()  # the grid cell follows the largest swept radius
         self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin)

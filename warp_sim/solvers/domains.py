@@ -263,6 +263,7 @@ def domain_sweep(
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
+    body_rolling_arm: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
     body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
@@ -359,7 +360,7 @@ def domain_sweep(
     if d == domain_count:
         for q in range(pair_count):
             solve_one_pair(domain_pair[walk(pair_first, pair_count, q, reverse)], mode, body_inv_mass, body_friction,
-                           body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, h, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
                            solver_v, solver_w)
@@ -395,7 +396,7 @@ def domain_sweep(
                          terrain_row_count)
         for k in range(pair_count):
             solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
-                           body_restitution, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, h, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
                            solver_v, solver_w)
@@ -437,7 +438,8 @@ def domain_sweep(
         else:
             for k in range(pair_count):
                 solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,
-                               body_friction, body_restitution, h, soft, max_push_velocity, restitution_threshold,
+                               body_friction, body_restitution, body_rolling_arm, h, soft, max_push_velocity,
+                               restitution_threshold,
                                pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                                pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
                                solver_drift_r, solver_v, solver_w)

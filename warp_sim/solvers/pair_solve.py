@@ -62,6 +62,7 @@ def solve_one_pair(
     body_inv_mass: wp.array(dtype=float),
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
+    body_rolling_arm: wp.array(dtype=float),
     h: float,
     soft: wp.vec3,
     max_push_velocity: float,
@@ -105,8 +106,15 @@ def solve_one_pair(
     vel.vj = solver_v[j]
     vel.wj = solver_w[j]
     friction = wp.sqrt(body_friction[i] * body_friction[j])
+    count = pair_point_count[p]
+    # rolling resistance of a sphere in the pair (terrain contacts: soft_step.solve_rolling); a
+    # sphere's pair has one point, so the pair's second slot keeps its accumulated angular impulse
+    rolling_arm = wp.max(body_rolling_arm[i], body_rolling_arm[j])
+    if mode == MODE_WARM_START and count == 1:
+        pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
+    normal_total = float(0.0)
 
-    for k in range(pair_point_count[p]):
+    for k in range(count):
         slot = p * POINTS + k
         point = pair_point[slot]
         ri = point - xi
@@ -158,6 +166,23 @@ def solve_one_pair(
                 new_t = new_t * (limit / mag)
             pair_tangent_impulse[slot] = new_t
             vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+            normal_total = normal_total + new_acc
+
+    if rolling_arm > 0.0 and count == 1 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
+        # against the relative spin, with the mass of its axis, clamped to c_r r J_n
+        acc_roll = pair_tangent_impulse[p * POINTS + 1]
+        spin = vel.wi - vel.wj
+        speed2 = wp.dot(spin, spin)
+        new_roll = acc_roll
+        if speed2 > 1.0e-18:
+            new_roll = acc_roll - (speed2 / (wp.dot(spin, inv_ii * spin) + wp.dot(spin, inv_ij * spin))) * spin
+        limit = rolling_arm * normal_total
+        mag2 = wp.dot(new_roll, new_roll)
+        if mag2 > limit * limit:
+            new_roll = new_roll * (limit / wp.sqrt(mag2))
+        pair_tangent_impulse[p * POINTS + 1] = new_roll
+        vel.wi = vel.wi + inv_ii * (new_roll - acc_roll)
+        vel.wj = vel.wj - inv_ij * (new_roll - acc_roll)
 
     # Only dynamic bodies are written: a static body may sit in many pairs of one colour.
     if inv_mi > 0.0:
@@ -218,6 +243,7 @@ def pair_pass(
     body_inv_mass: wp.array(dtype=float),
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
+    body_rolling_arm: wp.array(dtype=float),
     # Settings
     h: float,
     soft: wp.vec3,
@@ -241,7 +267,8 @@ def pair_pass(
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution, h, soft,
+        solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution,
+                       body_rolling_arm, h, soft,
                        max_push_velocity, restitution_threshold, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
                        solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)

@@ -1,0 +1,135 @@
+"""Resting contacts, sleeping bodies, rolling resistance and speculative windows, each as a family
+checked against its physical expectation (see solvers/impact.py, sleep.py, collide/narrow_phase.py).
+"""
+
+import numpy as np
+import pytest
+
+from warp_sim import ModelBuilder, SimConfig, Simulator
+from warp_sim.builder import Material
+from warp_sim.terrain import PlaneTerrain
+
+G = 9.81
+
+
+def simulator(builder, **config):
+    return Simulator(builder.finalize("cpu"), SimConfig(**config))
+
+
+@pytest.mark.parametrize("mass_a, mass_b", [(1.0, 1.0), (100.0, 1.0), (1.0, 100.0), (2.0, 3.0)])
+@pytest.mark.parametrize("restitution", [1.0, 0.5])
+def test_a_sleeping_body_takes_part_in_the_step_it_is_hit(mass_a, mass_b, restitution):
+    """Zero gravity, mu 0: ball A strikes ball B, which has fallen asleep.  The outcome is the
+    two-body impact's, v_A' = (m_A - e m_B) v / (m_A + m_B), v_B' = (1 + e) m_A v / (m_A + m_B),
+    momentum exact: a sleeping body is no wall.  B sleeps from t = 0.5 s, A arrives at 2/3 s; the
+    velocities are read at 1 s, before a slow B (under sleep_velocity) could fall asleep again."""
+    speed = 3.0
+    b = ModelBuilder(Material(restitution=restitution, friction=0.0))
+    b.add_sphere(0.5, mass_a, position=(-3.0, 0.0, 0.0), velocity=(speed, 0.0, 0.0))
+    b.add_sphere(0.5, mass_b, position=(0.0, 0.0, 0.0))
+    sim = simulator(b, gravity=(0.0, 0.0, 0.0), sleep=True)
+    slept = False
+    for _ in range(60):
+        sim.step()
+        slept = slept or sim.awake_count() < 2
+    assert slept
+    v = sim.state.body_vel.numpy()[:, 0].astype(np.float64)
+    total = mass_a + mass_b
+    assert v[0] == pytest.approx((mass_a - restitution * mass_b) * speed / total, abs=1e-4 * speed)
+    assert v[1] == pytest.approx((1 + restitution) * mass_a * speed / total, abs=1e-4 * speed)
+    assert mass_a * v[0] + mass_b * v[1] == pytest.approx(mass_a * speed, rel=1e-5)
+
+
+@pytest.mark.parametrize("restitution", [0.5, 0.9])
+@pytest.mark.parametrize("count", [5, 10])
+def test_resting_stack_with_restitution_stands(restitution, count):
+    """A resting contact approaches at ~0 m/s, under the restitution threshold, so it never bounces
+    however much load it holds: a stack with e > 0 stands like one with e = 0.  Bound: the soft
+    contacts' static sag, count^2 g / omega^2 (omega = 2 pi 60 Hz; test_body_contact derives it),
+    5 % and 1 mm over, and 1 cm sideways."""
+    b = ModelBuilder(Material(restitution=restitution, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    for k in range(count):
+        b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
+    sim = simulator(b, sleep=False)
+    sim.step(180)
+    top = sim.state.body_pos.numpy()[-1]
+    omega = 2 * np.pi * 60.0
+    assert abs(top[1] - (count - 0.5)) < 1.05 * count**2 * G / omega**2 + 1e-3
+    assert np.hypot(top[0], top[2]) < 0.01
+    assert np.abs(sim.state.body_vel.numpy()).max() < 0.05
+
+
+@pytest.mark.parametrize("ratio", [10.0, 1e4])
+def test_heavy_body_on_light_one_does_not_launch_it(ratio):
+    """e = 0.5, a heavy cube at rest on a light one: no contact approaches, nothing bounces; the
+    light cube must not be ejected (it was thrown at 118 m/s when the load's impulse decided)."""
+    b = ModelBuilder(Material(restitution=0.5, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5, 0.0))
+    b.add_box((0.5, 0.5, 0.5), ratio, position=(0.0, 1.5, 0.0))
+    sim = simulator(b, sleep=False)
+    sim.step(60)
+    assert np.abs(sim.state.body_vel.numpy()).max() < 1.0
+
+
+@pytest.mark.parametrize("gravity, dt, substeps", [(100.0, 1 / 30, 1), (9.81, 1 / 30, 1), (50.0, 1 / 60, 2)])
+def test_cube_on_plane_under_coarse_steps_settles_without_rising(gravity, dt, substeps):
+    """A cube resting on a plane with restitution never rises above its resting height (it rose
+    49 mm at g = 100, dt = 1/30, 1 substep) and comes to rest within 2 s."""
+    b = ModelBuilder(Material(restitution=0.5, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5, 0.0))
+    sim = simulator(b, gravity=(0.0, -gravity, 0.0), dt=dt, substeps=substeps, sleep=False)
+    heights = []
+    for _ in range(int(2.0 / dt)):
+        sim.step()
+        heights.append(float(sim.state.body_pos.numpy()[0][1]))
+    assert max(heights) < 0.5 + 1e-3
+    assert abs(float(sim.state.body_vel.numpy()[0][1])) < 0.05
+
+
+@pytest.mark.parametrize("rolling_resistance", [0.02, 0.05])
+@pytest.mark.parametrize("radius", [0.1, 0.25])
+def test_rolling_resistance_on_a_box_floor_matches_the_plane(rolling_resistance, radius):
+    """A solid ball rolling on a static box decelerates at 5/7 c_r g, as on the terrain plane.
+    Tolerance: the resistance is clamped per substep, exact for a steady roll; 2 %."""
+    decelerations = []
+    for floor in ("box", "plane"):
+        b = ModelBuilder(Material(friction=0.5, rolling_resistance=rolling_resistance))
+        if floor == "box":
+            b.add_box((20.0, 0.5, 20.0), 1.0, position=(0.0, -0.5, 0.0), static=True)
+        else:
+            b.set_terrain(PlaneTerrain())
+        b.add_sphere(radius, 1.0, position=(-5.0, radius, 0.0), velocity=(2.0, 0.0, 0.0),
+                     angular_velocity=(0.0, 0.0, -2.0 / radius))
+        sim = simulator(b, sleep=False)
+        sim.step(30)
+        v0 = float(sim.state.body_vel.numpy()[-1][0])
+        sim.step(60)
+        decelerations.append(v0 - float(sim.state.body_vel.numpy()[-1][0]))
+    expected = 5.0 / 7.0 * rolling_resistance * G
+    for a in decelerations:
+        assert a == pytest.approx(expected, rel=0.02)
+
+
+@pytest.mark.parametrize("gravity, dt", [(100.0, 1 / 30), (40.0, 1 / 20)])
+def test_body_floor_window_covers_gravity_like_the_terrain(gravity, dt):
+    """A sphere falling on a static box sinks no deeper than on the terrain plane: the pair's swept
+    reach includes the T^2 |g| a body falls within the step, as the terrain window does (it sank
+    16.7 cm into the box and 2.9 cm into the plane).  Tolerance 5 mm."""
+    deepest = []
+    for floor in ("box", "plane"):
+        b = ModelBuilder(Material(friction=0.5))
+        if floor == "box":
+            b.add_box((5.0, 0.5, 5.0), 1.0, position=(0.0, -0.5, 0.0), static=True)
+        else:
+            b.set_terrain(PlaneTerrain())
+        b.add_sphere(0.25, 1.0, position=(0.0, 3.0, 0.0))
+        sim = simulator(b, gravity=(0.0, -gravity, 0.0), dt=dt, substeps=1, sleep=False)
+        low = np.inf
+        for _ in range(int(1.5 / dt)):
+            sim.step()
+            low = min(low, float(sim.state.body_pos.numpy()[-1][1]))
+        deepest.append(0.25 - low)
+    assert deepest[0] < deepest[1] + 5e-3
