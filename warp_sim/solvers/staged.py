@@ -4,12 +4,11 @@ The same algorithm as soft_step.py (read its docstring for the derivation), spli
 launches because a pair couples two bodies: per-body stages run one thread per body, pair
 stages one thread per pair of one colour (pairs of a colour share no dynamic body).  One substep:
 
-    prepare (body) -> warm start (pairs, by colour)
+    [impacts: impact.py, only with restitution in the scene]
+    -> prepare (body) -> warm start (pairs, by colour)
     -> iterations x [terrain sweep (body), pair sweep (each colour)]       with soft bias
     -> integrate positions (body)
     -> relax_iterations x [terrain sweep (body), pair sweep (each colour)] no bias
-    -> restitution: stop pass, then bounce pass, each (body, then pairs by colour); Poisson,
-       see soft_step.restitution_impulse
     -> finalize (body)
 
 Contacts found once serve several substeps (Box2D v3's soft step; SimConfig.contact_update):
