@@ -36,7 +36,7 @@ from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
-from .types import SHAPE_BOX
+from .types import SHAPE_BOX, SHAPE_SPHERE
 
 
 SOLVERS = ("soft_step", "pushout")
@@ -105,6 +105,9 @@ class Simulator:
     # Skip box checkpoints that provably cannot reach the Fourier surface (collide/terrain_contact.py).
     # It changes no result; tests turn it off to check exactly that.
     terrain_cull = True
+    # With contacts found once per step, find the spheres' terrain contacts every substep anyway
+    # (collide_terrain, refresh_spheres); bench/rain.py measures both.
+    refresh_sphere_contacts = True
 
     def __init__(self, model: Model, config: SimConfig):
         if config.solver not in SOLVERS:
@@ -158,7 +161,9 @@ class Simulator:
     def substep_dt(self) -> float:
         return self.config.dt / self.config.substeps
 
-    def collide(self, state, contacts, h: float, speculative_margin: float):
+    def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False):
+        """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between
+        a step's collision passes and stored relative to the pass's pose (collide_terrain)."""
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
@@ -174,8 +179,9 @@ class Simulator:
                 m.terrain_cubic_bound,
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
+                int(refresh_spheres),
                 # State in
-                state.body_pos, state.body_rot, state.body_vel, state.body_angmom,
+                state.body_pos, state.body_rot, state.body_vel, state.body_angmom, self.solver.solver_ref_pos,
                 # Contacts
                 contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
                 contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
@@ -225,12 +231,24 @@ class Simulator:
         # the speculative windows cover the whole step: terrain slots open while the gap is
         # closable within dt, pairs are found with bounds swept over dt
         color_sizes = self._collide_pass(dt, margin, dt)
+        refresh = self._refreshes_spheres()
         for k in range(self.config.substeps):
+            if k > 0 and refresh:
+                self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin, True)
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
-                        h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule())
+                        h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule(),
+                        k > 0 and refresh)
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._stage("solve", self.pairs.store, self.contacts)
         self._keep_output_buffer()
+
+    def _refreshes_spheres(self) -> bool:
+        """Spheres' terrain contacts are found every substep (collide_terrain): a sphere has one
+        slot, found by a closest-point search warm-started from the last one, so it costs a few
+        terrain evaluations per sphere and substep."""
+        m = self.model
+        return (self.refresh_sphere_contacts and m.terrain_kind != TERRAIN_NONE and m.checkpoint_count > 0
+                and bool(np.any(m.host["body_shape"] == SHAPE_SPHERE)))
 
     def _collide_pass(self, h: float, margin: float, sweep_time: float):
         """Terrain and pair collision of states[0]; with sleeping on, the sleepers an awake body

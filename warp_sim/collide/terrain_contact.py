@@ -141,11 +141,13 @@ def collide_terrain(
     gravity_length: float,
     speculative_margin: float,
     cull: int,
+    refresh_spheres: int,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
+    reference_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
@@ -158,8 +160,18 @@ def collide_terrain(
     terrain_contact_count: wp.array(dtype=wp.int32),
 ):
     """One thread per body, over its slots: the body's velocity and, for a box on the Fourier
-    terrain, the surface sample under its centre are computed once and serve every checkpoint."""
+    terrain, the surface sample under its centre are computed once and serve every checkpoint.
+
+    ``refresh_spheres``: between the collision passes of a step (contacts found once per step), the
+    spheres' contacts are found again at the current pose and stored as the staged solver reads
+    them, relative to the pose of the step's pass (``reference_pos``): point - (x - x_ref) and
+    depth + n . (x - x_ref), so that its gap -depth + n . (x - x_ref) and arm p - x_ref are those of
+    now.  A sphere's tangent-plane gap is otherwise off by k d^2 / 2 after sliding d over ground of
+    curvature k, which made a ball rolling in a valley gain 16 % of its energy in 20 s.  Boxes are
+    left as they are (their slots and count)."""
     body = wp.tid() + tid_offset
+    if refresh_spheres != 0 and body_shape[body] != SHAPE_SPHERE:
+        return
     start = body_checkpoint_start[body]
     count = body_checkpoint_count[body]
     x = body_pos[body]
@@ -237,6 +249,10 @@ def collide_terrain(
         gap_closable = speculative_margin + h * approach + h * h * gravity_length
         if depth > -gap_closable:
             active += 1
+            if refresh_spheres != 0:
+                shift = x - reference_pos[body]
+                point = point - shift
+                depth = depth + wp.dot(normal, shift)
             terrain_contact_active[slot] = 1
             terrain_contact_point[slot] = point
             terrain_contact_normal[slot] = normal

@@ -83,14 +83,17 @@ class SoftStepSolver:
         return self._soft_value
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
-             fresh_contacts: bool = True, domains=None):
+             fresh_contacts: bool = True, domains=None, rebuild_rows: bool = False):
         """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path.
 
         ``fresh_contacts``: the contacts were found at ``state_in`` (else at an earlier substep's
         state, whose pose the staged solver keeps as the anchors' reference).
         ``domains``: a pair_pipeline.DomainSchedule; the staged soft step then sweeps slab by slab
         (solvers/domains.py) instead of colour by colour.
+        ``rebuild_rows``: some terrain contacts were found again since the last substep (the
+        simulator's sphere refresh), so every body's rows are rebuilt.
         """
+        self._rebuild_rows = rebuild_rows
         if self.settings.solver == "pushout":
             self._step_pushout(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
                                color_sizes or [])
@@ -133,7 +136,9 @@ class SoftStepSolver:
         return site
 
     def _make_rows(self) -> int:
-        return MAKE_ROWS if self.reuse_isotropic_rows else MAKE_ROWS_ALWAYS
+        if self.reuse_isotropic_rows and not getattr(self, "_rebuild_rows", False):
+            return MAKE_ROWS
+        return MAKE_ROWS_ALWAYS
 
     def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool, from_impact: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
