@@ -58,7 +58,10 @@ def main(argv=None) -> int:
     from warp_sim.cli import quiet_warp
 
     quiet_warp()
-    from render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
+    from warp_sim.render_package import ensure_render_package
+
+    ensure_render_package()
+    from warp_sim_render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
 
     scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)
     try:
@@ -70,8 +73,8 @@ def main(argv=None) -> int:
                                 paused=not (args.play or headless))
     controller.scene_path = Path(scene_path) if scene_path else None
 
-    from render.viewer import Viewer
-    from render.window import ContextError
+    from warp_sim_render.viewer import Viewer
+    from warp_sim_render.window import ContextError
 
     try:
         viewer = Viewer(controller, *args.size, visible=not headless, vsync=not args.no_vsync,
