@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
+from .commands import add_commands
 from .contacts import ContactOverflowError
+from .quiet import announce_compiles, init_warp, quiet_warp  # noqa: F401  (quiet_warp: old callers)
 from .run import format_summary, run
 from .scene import SceneError, load_scene
 from .simulator import NonFiniteStateError, expected_steps
@@ -29,13 +31,6 @@ from .simulator import NonFiniteStateError, expected_steps
 
 class CommandError(ValueError):
     """A failed command (bad option value, unwritable output, failed run): one ``error:`` line."""
-
-
-def quiet_warp():
-    """Silence Warp's start-up banner and module-load lines (call before Warp initialises)."""
-    wp.config.quiet = True  # Warp releases that predate log_level
-    if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="record a frame every K steps (default: 1); the last step is always recorded")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run_command)
+    add_commands(parser, commands)
     return parser
 
 
@@ -113,7 +109,9 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # usage errors (status 2) and --help (0) return instead of exiting
         return e.code if isinstance(e.code, int) else 2
-    quiet_warp()
+    init_warp(verbose=getattr(args, "verbose", False))
+    if not getattr(args, "quiet", False):
+        announce_compiles()
     try:
         return args.func(args)
     except (SceneError, CommandError, NonFiniteStateError, ContactOverflowError) as e:

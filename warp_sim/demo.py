@@ -42,6 +42,7 @@ def create_parser() -> argparse.ArgumentParser:
     p.add_argument("--play", action="store_true", help="start running (interactive runs start paused)")
     p.add_argument("--no-vsync", action="store_true")
     p.add_argument("--samples", type=int, default=4, help="multisampling (0 = off)")
+    p.add_argument("--verbose", action="store_true", help="show Warp's own start-up and compile output")
     p.add_argument("--history-mb", type=float, default=256.0, help="memory budget for time-travel keyframes")
     return p
 
@@ -55,9 +56,10 @@ def main(argv=None) -> int:
         print("error: --frames must be >= 1", file=sys.stderr)
         return 2
 
-    from warp_sim.cli import quiet_warp
+    from warp_sim.quiet import announce_compiles, init_warp
 
-    quiet_warp()
+    init_warp(verbose=args.verbose)
+    announce_compiles()
     from warp_sim.render_package import ensure_render_package
 
     ensure_render_package()
@@ -83,9 +85,11 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     try:
-        viewer.run(frames=args.frames, record_dir=args.record, screenshot=args.screenshot)
+        written = viewer.run(frames=args.frames, record_dir=args.record, screenshot=args.screenshot)
     finally:
         viewer.close()
+    if args.record:
+        print(f"wrote {written} frames to {Path(args.record).resolve() / 'frame_00000.png'} ...")
     if args.screenshot:
         print(f"wrote {args.screenshot}")
     return 0
