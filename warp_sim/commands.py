@@ -165,11 +165,16 @@ def export_command(args) -> int:
     for option, path in (("--usd", args.usd), ("--csv", args.csv)):
         if path and not Path(path).resolve().parent.is_dir():
             raise CommandError(f"{option}: directory '{Path(path).parent}' does not exist")
-    record = load_recording(args.run)
-    if args.csv:
-        rows = export_csv(record, args.csv)
-        print(f"wrote {args.csv} ({rows:,} rows)", file=sys.stderr)
-    if args.usd:
-        export_usd(record, args.usd, extent=args.terrain_extent, resolution=args.terrain_resolution)
-        print(f"wrote {args.usd}", file=sys.stderr)
+    try:
+        record = load_recording(args.run)
+        if args.csv:
+            rows = export_csv(record, args.csv)
+            print(f"wrote {args.csv} ({rows:,} rows)", file=sys.stderr)
+        if args.usd:
+            export_usd(record, args.usd, extent=args.terrain_extent, resolution=args.terrain_resolution)
+            print(f"wrote {args.usd}", file=sys.stderr)
+    except OSError as e:
+        raise CommandError(f"cannot write export: {e.strerror or e}: '{e.filename}'") from None
+    except ValueError as e:  # RecordingError, or no USD modules
+        raise CommandError(str(e)) from None
     return 0
