@@ -107,7 +107,7 @@ class ViewSettings:
     show_normals: bool = False
     show_velocities: bool = False
     show_penetration: bool = False
-    debug_on_top: bool = True
+    debug_on_top: bool = False  # markers hidden by hills unless asked (they used to show through)
 
 
 @dataclass

@@ -32,6 +32,8 @@ def parse_size(text: str) -> tuple[int, int]:
 def create_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m warp_sim.demo", description=__doc__.split("\n\n")[0])
     p.add_argument("scene", nargs="?", help="scene file (.toml); default examples/scenes/mixed_rain.toml")
+    p.add_argument("--replay", metavar="RUN.npz", help="play a run recorded by 'python -m warp_sim run' "
+                                                       "(play, pause, scrub, speed) on the terrain it ran on")
     p.add_argument("--device", default=None, help="Warp device for the physics: cpu or cuda (default: the scene's)")
     p.add_argument("--screenshot", metavar="PNG", help="render --frames frames in a hidden window, save the last")
     p.add_argument("--frames", type=int, default=None, help="stop after this many frames")
@@ -65,15 +67,30 @@ def main(argv=None) -> int:
     ensure_render_package()
     from warp_sim_render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
 
-    scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)
-    try:
-        scene = load_demo_scene(scene_path)
-    except (ValueError, OSError) as exc:  # SceneError is a ValueError: one clear line
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    controller = DemoController(scene, device=args.device, history_budget_mb=args.history_mb,
-                                paused=not (args.play or headless))
-    controller.scene_path = Path(scene_path) if scene_path else None
+    if args.replay:
+        if args.scene:
+            print("error: give a scene file or --replay RUN.npz, not both", file=sys.stderr)
+            return 2
+        from warp_sim_render.replay import ReplayController
+
+        try:
+            # headless renders advance a fixed 1/60 s of the run per frame, so they do not
+            # depend on how fast this machine draws
+            controller = ReplayController(args.replay, device=args.device, playing=True,
+                                          frame_dt=1.0 / 60.0 if headless else None)
+        except (ValueError, OSError) as exc:  # RecordingError is a ValueError
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    else:
+        scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)
+        try:
+            scene = load_demo_scene(scene_path)
+        except (ValueError, OSError) as exc:  # SceneError is a ValueError: one clear line
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        controller = DemoController(scene, device=args.device, history_budget_mb=args.history_mb,
+                                    paused=not (args.play or headless))
+        controller.scene_path = Path(scene_path) if scene_path else None
 
     from warp_sim_render.viewer import Viewer
     from warp_sim_render.window import ContextError
