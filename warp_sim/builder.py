@@ -251,15 +251,15 @@ class ModelBuilder:
         """Add n bodies at once; returns their indices.
 
         shape: "sphere", "box", or an (n) array of those names or of 0 (sphere) / 1 (box).
-        size: a scalar or an (n) array (a sphere's radius, a cube's half extent), or (3) or
-        (n, 3) rows of half extents (a sphere's row is (r, ignored, ignored)).  With n == 3 a
-        3-array is read as radii when every body is a sphere, else as one row.
+        size: a scalar, an (n) or (n, 1) array (a sphere's radius, a cube's half extent), or
+        (3) or (n, 3) rows of half extents (a sphere's row is (r, ignored, ignored)).  A
+        3-array is always one row; give the radii of exactly 3 bodies as (3, 1).
         mass, restitution, friction, static: a scalar or an (n) array.  position, velocity,
         angular_velocity: (3) or (n, 3); orientation: (4) or (n, 4) quaternions (x y z w), not
         all 0.  Every entry is checked with the rules of add_sphere / add_box; the first bad one
         is named by index, e.g. ``mass[17] must be a positive finite number, got 0.0``.
         """
-        n = self._bulk_count(shape, size, mass, position)
+        n = self._bulk_count(shape, size, mass, position, orientation, velocity)
         codes = {"sphere": SHAPE_SPHERE, "box": SHAPE_BOX}
         if isinstance(shape, str):
             if shape not in codes:
@@ -283,7 +283,9 @@ class ModelBuilder:
         is_sphere = shapes == SHAPE_SPHERE
 
         raw_size = np.asarray(size, dtype=np.float64)
-        if raw_size.ndim == 0 or (raw_size.ndim == 1 and len(raw_size) == n and (is_sphere.all() or n != 3)):
+        if raw_size.ndim == 2 and raw_size.shape[1] == 1:
+            raw_size = raw_size[:, 0]
+        if raw_size.ndim == 0 or (raw_size.ndim == 1 and len(raw_size) != 3):
             sizes = np.repeat(np.broadcast_to(raw_size, (n,))[:, None], 3, axis=1)  # boxes: cubes
         else:
             sizes = self._rows_of(raw_size, n, 3, "size").copy()
@@ -319,7 +321,7 @@ class ModelBuilder:
         return np.arange(first, first + n)
 
     @staticmethod
-    def _bulk_count(shape, size, mass, position) -> int:
+    def _bulk_count(shape, size, mass, position, orientation=None, velocity=None) -> int:
         for value, width in ((shape, 0), (mass, 0), (position, 3), (size, 3)):
             a = np.asarray(value)
             if (width == 0 and a.ndim == 1) or a.ndim == 2:
@@ -327,6 +329,9 @@ class ModelBuilder:
         a = np.asarray(size)
         if a.ndim == 1 and len(a) != 3:
             return len(a)
+        for value in (orientation, velocity):
+            if value is not None and np.ndim(value) == 2:
+                return len(value)
         raise ValidationError("add_bodies needs at least one per-body array (shape, mass, position or size) "
                               "to give the body count")
 

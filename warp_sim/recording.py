@@ -259,11 +259,19 @@ def save_checkpoint(path, sim, run_info: dict):
     arrays = {f"array_{i:03d}": a.numpy() for i, a in enumerate(snap["arrays"])}
     for i, a in enumerate(sim.states[1].fields()):
         arrays[f"state1_{i:03d}"] = a.numpy()
+    for i, a in enumerate(_measured_arrays(sim)):
+        arrays[f"measured_{i:03d}"] = a.numpy()
     info = dict(run_info, step_count=int(snap["step_count"]), array_count=len(snap["arrays"]),
                 checkpoint_format=CHECKPOINT_FORMAT)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.npz")
     np.savez(tmp, info=np.asarray(to_json(info)), **arrays)
     os.replace(tmp, path)
+
+
+def _measured_arrays(sim) -> list:
+    """Not read by the next step, but by contact_count(): kept so a resumed run's first frame matches."""
+    c = sim.contacts
+    return [c.pair_count, c.pair_point_count] if c.pair_max > 0 else []
 
 
 def load_checkpoint(path) -> tuple[dict, dict]:
@@ -291,10 +299,13 @@ def restore_checkpoint(sim, info: dict, arrays: dict):
                          f"simulator has {len(targets)}: it was written for another scene or settings")
     for i, dst in enumerate(targets):
         src = arrays[f"array_{i:03d}"]
-        if tuple(src.shape) != tuple(dst.shape):
+        if tuple(src.shape[:dst.ndim]) != tuple(dst.shape):
             raise ValueError(f"--resume: state array {i} has shape {src.shape} in the checkpoint, "
-                             f"{tuple(dst.shape)} in this scene's simulator: another scene")
+                             f"{tuple(dst.shape)} in this scene's simulator: another scene or settings")
         dst.assign(wp.array(src, dtype=dst.dtype, device=dst.device))
     for i, dst in enumerate(sim.states[1].fields()):
         dst.assign(wp.array(arrays[f"state1_{i:03d}"], dtype=dst.dtype, device=dst.device))
+    for i, dst in enumerate(_measured_arrays(sim)):
+        if f"measured_{i:03d}" in arrays:
+            dst.assign(wp.array(arrays[f"measured_{i:03d}"], dtype=dst.dtype, device=dst.device))
     sim.step_count = int(info["step_count"])

@@ -97,9 +97,10 @@ def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=No
 
     def record():
         s = sim.state
+        # copies: on the CPU .numpy() is a view of the live state buffer
         frame = {
-            "time": sim.time, "position": s.body_pos.numpy(), "orientation": s.body_quat.numpy(),
-            "velocity": s.body_vel.numpy(), "angular_velocity": sim.angular_velocity(),
+            "time": sim.time, "position": s.body_pos.numpy().copy(), "orientation": s.body_quat.numpy().copy(),
+            "velocity": s.body_vel.numpy().copy(), "angular_velocity": sim.angular_velocity(),
             "kinetic_energy": sim.kinetic_energy(), "max_penetration": sim.max_penetration(),
             "contact_count": sim.contact_count(),
         }
