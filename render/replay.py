@@ -41,13 +41,20 @@ def replay_scene(record: dict, name: str) -> DemoScene:
     """A DemoScene with the recorded bodies at their first frame, on the recorded terrain."""
     builder = ModelBuilder(Material())
     builder.set_terrain(terrain_from_record(record))
-    pos, quat = record["position"][0], record["orientation"][0]
-    for b, (shape, size) in enumerate(zip(record["shape"], record["size"], strict=True)):
-        q = quat[b] if np.all(np.isfinite(quat[b])) and np.any(quat[b]) else (0.0, 0.0, 0.0, 1.0)
-        if shape == SHAPE_SPHERE:
-            builder.add_sphere(float(size[0]), position=pos[b], orientation=q)
-        else:
-            builder.add_box(tuple(float(v) for v in size), position=pos[b], orientation=q)
+    pos = np.asarray(record["position"][0], np.float64)
+    quat = np.array(record["orientation"][0], np.float64)
+    bad = ~np.all(np.isfinite(quat), axis=1) | ~np.any(quat, axis=1)
+    quat[bad] = (0.0, 0.0, 0.0, 1.0)  # a frame-0 NaN (a body that blew up at once) draws unrotated
+    pos[~np.all(np.isfinite(pos), axis=1)] = 0.0
+    shapes, sizes = np.asarray(record["shape"]), np.asarray(record["size"], np.float64)
+    if hasattr(builder, "add_bodies"):  # one call instead of a Python loop per body
+        builder.add_bodies(shapes, sizes, position=pos, orientation=quat)
+    else:
+        for b, (shape, size) in enumerate(zip(shapes, sizes, strict=True)):
+            if shape == SHAPE_SPHERE:
+                builder.add_sphere(float(size[0]), position=pos[b], orientation=quat[b])
+            else:
+                builder.add_box(tuple(float(v) for v in size), position=pos[b], orientation=quat[b])
     summary = record.get("summary") or {}
     dt = float(summary.get("dt", SimConfig.dt)) if isinstance(summary, dict) else SimConfig.dt
     return DemoScene(name, SimConfig(dt=dt, sleep=False), builder, None, source=name)

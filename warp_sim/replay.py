@@ -40,16 +40,16 @@ def _read_npz(path: Path) -> dict:
 def load_recording(path) -> dict:
     """Read a run written by ``python -m warp_sim run`` and check the keys a replay needs."""
     path = Path(path)
-    if not path.is_file():
-        raise RecordingError(f"cannot read run file '{path}': no such file")
     try:
-        try:
-            from .recording import load_run
-        except ImportError:  # older checkouts: the .npz layout of warp_sim/cli.py
-            load_run = _read_npz
+        from .recording import load_run
+    except ImportError:  # older checkouts: the plain .npz layout
+        load_run = _read_npz
+        if not path.is_file():
+            raise RecordingError(f"cannot read run file '{path}': no such file") from None
+    try:
         record = dict(load_run(path))
-    except RecordingError:
-        raise
+    except FileNotFoundError:  # neither the file nor an unfinished run's chunk folder
+        raise RecordingError(f"cannot read run file '{path}': no such file") from None
     except (OSError, ValueError, KeyError) as e:
         raise RecordingError(f"{path}: not a recorded run ({e})") from None
     missing = [k for k in REQUIRED if k not in record]
