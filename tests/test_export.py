@@ -128,6 +128,11 @@ def test_usd_read_back(recorded, tmp_path):
     # time codes per second = recorded frames per simulated second (12 steps of 0.02 s, every 3rd)
     assert stage.GetTimeCodesPerSecond() == pytest.approx((frames - 1) / record["time"][-1])
 
+    if record.get("metadata"):  # provenance travels with the export
+        import json
+
+        meta = json.loads(stage.GetPrimAtPath("/World").GetCustomDataByKey("warp_sim:metadata"))
+        assert meta["scene_text"] == scene.read_text()
     sphere = stage.GetPrimAtPath("/World/Bodies/body_000000")
     box = stage.GetPrimAtPath("/World/Bodies/body_000001")
     assert sphere.GetTypeName() == "Sphere" and box.GetTypeName() == "Cube"

@@ -15,6 +15,7 @@ as everywhere in this package).  USD needs ``usd-core`` (``pip install "warp-sim
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +96,9 @@ def export_usd(record: dict, path, extent: float | None = None, resolution: int 
     summary = record.get("summary") or {}
     if isinstance(summary, dict) and summary.get("scene"):
         world.GetPrim().SetCustomDataByKey("warp_sim:scene", str(summary["scene"]))
+    metadata = record.get("metadata")
+    if isinstance(metadata, dict) and metadata:  # where the run came from: scene text, versions, machine
+        world.GetPrim().SetCustomDataByKey("warp_sim:metadata", json.dumps(metadata, default=str))
 
     terrain = terrain_from_record(record)
     if isinstance(terrain, FourierTerrain) or (isinstance(terrain, PlaneTerrain) and abs(terrain.normal[1]) > 1e-6):
