@@ -102,3 +102,18 @@ def test_quiet_unless_verbose(tmp_path):
     loud = run_module("run", scene, "--steps", "2", "--out", "v.npz", "--verbose", cwd=tmp_path)
     assert loud.returncode == 0, loud.stderr
     assert "Warp 1." in loud.stdout + loud.stderr and "initialized" in loud.stdout + loud.stderr
+
+
+def test_first_compile_is_announced_once(tmp_path):
+    """An empty kernel cache: one "compiling kernels" line; the same cache again: none."""
+    env = {**os.environ, "WARP_CACHE_PATH": str(tmp_path / "cache"),
+           "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    probe = str(ROOT / "tests" / "compile_probe.py")
+    runs = [subprocess.run([sys.executable, probe], env=env, capture_output=True, text=True, timeout=300)
+            for _ in range(2)]
+    for done in runs:
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.strip() == "4.0"
+    first = [line for line in runs[0].stderr.splitlines() if line.strip()]
+    assert len(first) == 1 and first[0].startswith("compiling kernels (first run, ~") and first[0].endswith(" s)…")
+    assert "compiling" not in runs[1].stderr
