@@ -70,3 +70,46 @@ def write_rows(name: str, rows: list[dict], meta: dict, out_dir: Path | None = N
     json_path = out_dir / f"{name}.json"
     json_path.write_text(json.dumps({"machine": meta, "rows": rows}, indent=2))
     return csv_path, json_path
+
+
+QUICK_LABEL = "QUICK smoke run: tiny sizes, not comparable with bench/results"
+
+
+def output_dir(out_dir, quick: bool, bench: str) -> Path:
+    """Where a run writes: ``--out-dir``, else bench/results; a ``--quick`` run never writes there.
+
+    Quick runs without ``--out-dir`` go to a new temporary folder (printed), so a smoke run cannot
+    overwrite the committed results, and every chart they save says it was quick.
+    """
+    if not quick:
+        return Path(out_dir) if out_dir is not None else RESULTS
+    if out_dir is None:
+        import tempfile
+
+        folder = Path(tempfile.mkdtemp(prefix=f"warp_sim_{bench}_quick_"))
+        print(f"--quick: writing to {folder} (bench/results keeps the committed full runs)")
+        out_dir = folder
+    elif Path(out_dir).resolve() == RESULTS.resolve():
+        raise SystemExit(f"error: --quick results may not go to {RESULTS} (it holds the committed full runs); "
+                         "give another --out-dir or none")
+    label_quick_charts()
+    return Path(out_dir)
+
+
+def label_quick_charts():
+    """Every figure saved from now on carries QUICK_LABEL across its top."""
+    from matplotlib.figure import Figure
+
+    if getattr(Figure.savefig, "_quick_label", False):
+        return
+    original = Figure.savefig
+
+    def savefig(self, *args, **kwargs):
+        if not getattr(self, "_quick_labelled", False):
+            self.text(0.5, 0.999, QUICK_LABEL, ha="center", va="top", fontsize=9, color="#c0392b",
+                      fontweight="bold")
+            self._quick_labelled = True
+        return original(self, *args, **kwargs)
+
+    savefig._quick_label = True
+    Figure.savefig = savefig

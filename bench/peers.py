@@ -4,7 +4,7 @@
     python bench/peers.py                      # 1k and 4k spheres, 1k boxes, the analytic scenes
     python bench/peers.py --contact on off     # the committed results: also terrain contact only
     python bench/peers.py --engines warp_sim mujoco --counts 1000 --scenes rain bounce
-    python bench/peers.py --quick              # tiny sizes, a smoke run
+    python bench/peers.py --quick              # tiny sizes, a smoke run (to a temporary folder)
 
 An engine that is not installed is skipped with a line saying so; the core package never
 imports any of them.
@@ -83,7 +83,7 @@ import numpy as np
 import warp as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench.common import RESULTS, machine_info  # noqa: E402
+from bench.common import machine_info, output_dir  # noqa: E402
 from bench.scaling import write_table  # noqa: E402
 from warp_sim import cases  # noqa: E402
 
@@ -328,10 +328,11 @@ def main(argv=None) -> int:
     p.add_argument("--case-budget", type=float, default=400.0,
                    help="skip (and say so) a rain case whose projected wall time is longer [s]")
     p.add_argument("--quick", action="store_true", help="N = 64 spheres, short runs")
-    p.add_argument("--out-dir", type=Path, default=RESULTS)
+    p.add_argument("--out-dir", type=Path, default=None, help="default bench/results; --quick: a temporary folder")
     p.add_argument("--name", default="peers")
     p.add_argument("--no-chart", action="store_true")
     args = p.parse_args(argv)
+    args.out_dir = output_dir(args.out_dir, args.quick, "peers")
     if args.quick:
         args.counts, args.shapes, args.settle, args.steps, args.samples = [64], ["sphere"], 0.1, 10, 2
     wp.config.log_level = wp.LOG_WARNING

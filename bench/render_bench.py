@@ -49,8 +49,11 @@ def grid_scene(count: int):
 def measure(count: int, frames: int, warmup: int, size: tuple[int, int], device: str) -> dict:
     from OpenGL import GL
 
-    from render.controller import DemoController
-    from render.viewer import Viewer
+    from warp_sim.render_package import ensure_render_package
+
+    ensure_render_package()
+    from warp_sim_render.controller import DemoController
+    from warp_sim_render.viewer import Viewer
 
     start = time.perf_counter()
     controller = DemoController(grid_scene(count), device=device, paused=True)

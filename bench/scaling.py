@@ -1,7 +1,7 @@
 """Body-count scaling: steps/s, body-steps/s, per-stage time and memory per body against N.
 
     python bench/scaling.py                         # full sweep on cpu (N = 1k ... 100k)
-    python bench/scaling.py --quick                 # small sizes, a smoke run
+    python bench/scaling.py --quick                 # small sizes, a smoke run (to a temporary folder)
     python bench/scaling.py --counts 1000 10000 --shapes sphere --contact off --device cuda
 
 Every case is ``warp_sim.cases.terrain_drop(N, shape)`` (the shared benchmark scene: N bodies
@@ -47,7 +47,7 @@ import numpy as np
 import warp as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench.common import RESULTS, machine_info, state_gate  # noqa: E402
+from bench.common import machine_info, output_dir, state_gate  # noqa: E402
 from warp_sim import cases  # noqa: E402
 
 STAGES = ("terrain", "pairs", "solve", "sleep")
@@ -297,10 +297,11 @@ def main(argv=None) -> int:
     p.add_argument("--sleep", action="store_true", help="sleeping on (default off: measure the solver)")
     p.add_argument("--device", default="cpu")
     p.add_argument("--quick", action="store_true", help=f"N = {QUICK_COUNTS}, short settle and budget")
-    p.add_argument("--out-dir", type=Path, default=RESULTS)
+    p.add_argument("--out-dir", type=Path, default=None, help="default bench/results; --quick: a temporary folder")
     p.add_argument("--tag", default="", help="suffix for the result file names")
     p.add_argument("--no-progress", action="store_true")
     args = p.parse_args(argv)
+    args.out_dir = output_dir(args.out_dir, args.quick, "scaling")
     if args.quick:
         args.counts = args.counts or QUICK_COUNTS
         args.settle = min(args.settle, 0.1)

@@ -550,10 +550,11 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--studies", nargs="+", default=STUDIES, choices=STUDIES)
     p.add_argument("--quick", action="store_true", help="tiny sweeps")
-    p.add_argument("--out-dir", type=Path, default=common.RESULTS)
+    p.add_argument("--out-dir", type=Path, default=None, help="default bench/results; --quick: a temporary folder")
     p.add_argument("--stack-time", type=float, default=None, help="[s], default 10 (quick 2)")
     p.add_argument("--pyramid-time", type=float, default=None, help="[s], default 5 (quick 2)")
     args = p.parse_args(argv)
+    args.out_dir = common.output_dir(args.out_dir, args.quick, "stability")
     size = dict(QUICK if args.quick else FULL)
     if args.stack_time:
         size["stack_time"] = args.stack_time

@@ -566,10 +566,11 @@ def main(argv=None) -> int:
     p.add_argument("--compute-bodies", type=int, default=None,
                    help="boxes used to measure the compute-bound cost per body-step (0: skip)")
     p.add_argument("--quick", action="store_true", help="tiny sizes (two dt per method, short runs)")
-    p.add_argument("--out-dir", type=Path, default=common.RESULTS)
+    p.add_argument("--out-dir", type=Path, default=None, help="default bench/results; --quick: a temporary folder")
     p.add_argument("--device", default="cpu")
     p.add_argument("--replot", action="store_true", help="only redraw the PNGs from the JSON in --out-dir")
     args = p.parse_args(argv)
+    args.out_dir = common.output_dir(args.out_dir, args.quick, "work_precision")
     if args.replot:
         return replot(args.out_dir, args.cases)
     size = QUICK if args.quick else FULL

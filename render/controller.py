@@ -31,7 +31,9 @@ from warp_sim.types import FRICTION_MODELS, INTEGRATORS, ROTATIONS
 from .history import History
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-SCENE_DIR = REPO_ROOT / "examples" / "scenes"
+# examples/scenes in a checkout; installed, the same files ship as warp_sim_render/scenes
+SCENE_DIR = next((d for d in (Path(__file__).resolve().parent / "scenes", REPO_ROOT / "examples" / "scenes")
+                  if d.is_dir()), REPO_ROOT / "examples" / "scenes")
 DEFAULT_SCENE = SCENE_DIR / "mixed_rain.toml"
 TERRAIN_MAX_TERMS = 32  # what the Terrain uniform block holds
 
@@ -105,7 +107,7 @@ class ViewSettings:
     show_normals: bool = False
     show_velocities: bool = False
     show_penetration: bool = False
-    debug_on_top: bool = True
+    debug_on_top: bool = False  # markers hidden by hills unless asked (they used to show through)
 
 
 @dataclass

@@ -30,7 +30,7 @@ class DebugOptions:
     normals: bool = False
     velocities: bool = False
     penetration: bool = False
-    on_top: bool = True
+    on_top: bool = False
     normal_length: float = 0.5  # [m]
     velocity_scale: float = 0.1  # [s]: a vector of v * scale metres
     penetration_scale: float = 10.0  # depths are millimetres; drawn magnified

@@ -16,7 +16,11 @@ from imgui_bundle import imgui, implot
 from imgui_bundle.python_backends.glfw_backend import GlfwRenderer
 
 from .controller import PARAMS, list_scenes, load_demo_scene
+from .plot_limits import axis_limits
 
+PANEL_WIDTH = 380.0
+LABEL_WIDTH = 130.0  # room right of each widget for its label ("solver iterations" was cut off)
+PLOT_HEIGHT = 120.0
 NOTE_COLOR = (1.0, 0.8, 0.3, 1.0)
 DIM_COLOR = (0.7, 0.7, 0.7, 1.0)
 
@@ -145,10 +149,20 @@ class Gui:
         sim = c.sim
         io = imgui.get_io()
         imgui.set_next_window_pos((10, 10), imgui.Cond_.first_use_ever)
-        imgui.set_next_window_size((360, min(io.display_size.y - 20, 820)), imgui.Cond_.first_use_ever)
+        # The window fits the display; the sections below the controls scroll inside it.
+        imgui.set_next_window_size((PANEL_WIDTH, max(200.0, io.display_size.y - 20)), imgui.Cond_.first_use_ever)
         imgui.begin("warp_sim")
-        fps = 1000.0 / max(self.viewer.frame_ms, 1e-3)
-        imgui.text(f"{fps:5.1f} fps  physics {c.last_physics_ms:6.2f} ms  render {self.viewer.render_ms:6.2f} ms")
+        imgui.push_item_width(-LABEL_WIDTH)  # widgets leave room for their labels
+        # the first frame has no frame time yet (1000 / 0 would read as a million fps)
+        fps = f"{1000.0 / self.viewer.frame_ms:5.1f}" if self.viewer.frames_done >= 2 and self.viewer.frame_ms > 0 \
+            else "  -- "
+        if getattr(c, "replay_mode", False):
+            imgui.text(f"{fps} fps  render {self.viewer.render_ms:6.2f} ms")
+            self._replay_panel()
+            imgui.pop_item_width()
+            imgui.end()
+            return
+        imgui.text(f"{fps} fps  physics {c.last_physics_ms:6.2f} ms  render {self.viewer.render_ms:6.2f} ms")
         imgui.text(f"step {sim.step_count}  t = {sim.time:.3f} s  bodies {c.body_count}  contacts "
                    f"{self.viewer.contact_count}")
         if imgui.button("Pause" if not c.paused else "Play"):
@@ -177,10 +191,12 @@ class Gui:
                                       f"{h.keyframe_bytes() / 2**20:.1f} MiB")
         for note in c.recent_notes():
             imgui.text_colored(NOTE_COLOR, note)
+        imgui.begin_child("sections", imgui.ImVec2(0, 0))  # scrolls when the open sections are taller
+        imgui.push_item_width(-LABEL_WIDTH)
         if imgui.collapsing_header("Plots", imgui.TreeNodeFlags_.default_open):
             self._plots()
 
-        if imgui.collapsing_header("Scene", imgui.TreeNodeFlags_.default_open):
+        if imgui.collapsing_header("Scene"):
             self._scene_picker()
         if imgui.collapsing_header("Physics", imgui.TreeNodeFlags_.default_open):
             self._float("dt", 1e-4, 0.05, "%.5f", log=True)
@@ -198,7 +214,7 @@ class Gui:
                 self._float("friction", on_release=True)
             self._float("restitution", on_release=True)
             self._float("rolling_resistance", on_release=True)
-        if imgui.collapsing_header("Terrain", imgui.TreeNodeFlags_.default_open):
+        if imgui.collapsing_header("Terrain"):
             if c.get_param("amplitude") is None:
                 imgui.text_colored(DIM_COLOR, f"{sim.model.terrain.kind} terrain: nothing to edit")
             else:
@@ -229,9 +245,63 @@ class Gui:
                 cam.set_mode("orbit" if orbit else "fly")
             imgui.text_colored(DIM_COLOR, f"camera speed {cam.speed:.1f} m/s (scroll)")
             for name in ("show_checkpoints", "show_contacts", "show_normals", "show_velocities",
-                         "show_penetration", "debug_on_top"):
+                         "show_penetration"):
                 self._bool(name, name.replace("show_", "").replace("_", " "))
+            self._bool("debug_on_top", "markers show through terrain")
+        imgui.pop_item_width()
+        imgui.end_child()
+        imgui.pop_item_width()
         imgui.end()
+
+    def _replay_panel(self):
+        """Play, pause, scrub and speed for a recorded run (render/replay.py), then plots and view."""
+        c = self.controller
+        p = c.playback
+        imgui.text(f"replay {c.path.name}: {c.body_count} bodies")
+        imgui.text(f"frame {p.frame + 1} of {c.frame_count}  t = {p.time:.3f} of {p.end:.3f} s")
+        if imgui.button("Pause" if p.playing else "Play"):
+            c.toggle_pause()
+        imgui.same_line()
+        if imgui.button("|<"):
+            c.reset()
+        imgui.same_line()
+        if imgui.button("< frame"):
+            c.paused = True
+            c.step_backward()
+        imgui.same_line()
+        if imgui.button("frame >"):
+            c.paused = True
+            c.step_forward()
+        changed, t = imgui.slider_float("time [s]", p.time, p.start, max(p.end, p.start + 1e-6), "%.3f")
+        if changed:
+            c.paused = True
+            c.seek_time(t)
+        changed, frame = imgui.slider_int("frame", p.frame, 0, max(c.frame_count - 1, 1))
+        if changed:
+            c.paused = True
+            c.seek(frame)
+        speeds = list(p.SPEEDS)
+        index = speeds.index(p.speed) if p.speed in speeds else speeds.index(1.0)
+        changed, index = imgui.combo("speed", index, [f"{v:g}x" for v in speeds])
+        if changed:
+            p.speed = speeds[index]
+        _, p.loop = imgui.checkbox("loop", p.loop)
+        for note in c.recent_notes():
+            imgui.text_colored(NOTE_COLOR, note)
+        imgui.begin_child("sections", imgui.ImVec2(0, 0))
+        imgui.push_item_width(-LABEL_WIDTH)
+        if imgui.collapsing_header("Plots (recorded)", imgui.TreeNodeFlags_.default_open):
+            self._plots()
+        if imgui.collapsing_header("View", imgui.TreeNodeFlags_.default_open):
+            self._choice("color_mode")
+            self._bool("wireframe")
+            self._bool("vsync")
+            cam = self.viewer.camera
+            changed, orbit = imgui.checkbox("orbit camera (C)", cam.mode == "orbit")
+            if changed:
+                cam.set_mode("orbit" if orbit else "fly")
+        imgui.pop_item_width()
+        imgui.end_child()
 
     def _scene_picker(self):
         c = self.controller
@@ -260,23 +330,33 @@ class Gui:
             imgui.text_colored(DIM_COLOR, "plots start with the second frame")
             return
         x = data["frame"]
-        size = imgui.ImVec2(-1, 95)
-        fit = implot.AxisFlags_.auto_fit
-        if implot.begin_plot("##times", size):
-            implot.setup_axes("", "ms", fit | implot.AxisFlags_.no_tick_labels, fit)
-            implot.plot_line("physics ms", x, data["physics_ms"])
-            implot.plot_line("render ms", x, data["render_ms"])
-            implot.end_plot()
-        if implot.begin_plot("##counts", size):
-            implot.setup_axes("", "contacts", fit | implot.AxisFlags_.no_tick_labels, fit)
-            implot.setup_axis(implot.ImAxis_.y2, "J", fit | implot.AxisFlags_.opposite)
-            implot.plot_line("contacts", x, data["contacts"])
-            energy = data["kinetic_energy"]
-            if np.isfinite(energy).any():
-                implot.set_axes(implot.ImAxis_.x1, implot.ImAxis_.y2)
-                implot.plot_line("kinetic energy", x, np.nan_to_num(energy))
-            implot.end_plot()
-        if implot.begin_plot("##awake", size):
-            implot.setup_axes("", "awake bodies", fit | implot.AxisFlags_.no_tick_labels, fit)
-            implot.plot_line("awake bodies", x, data["awake"])
-            implot.end_plot()
+        energy = data["kinetic_energy"]
+        # physics and render time differ twentyfold: each gets its own axis (physics left, render right)
+        if getattr(self.controller, "replay_mode", False):  # nothing is simulated in a replay
+            self._plot("##times", x, [("render ms", data["render_ms"])], [])
+        else:
+            self._plot("##times", x, [("physics ms", data["physics_ms"])], [("render ms", data["render_ms"])])
+        self._plot("##counts", x, [("contacts", data["contacts"])],
+                   [("kinetic energy J", energy)] if np.isfinite(energy).any() else [])
+        self._plot("##awake", x, [("awake bodies", data["awake"])], [])
+
+    def _plot(self, plot_id: str, x, left: list, right: list):
+        """One live plot: a legend above the data (never over it) and limits from axis_limits."""
+        if not implot.begin_plot(plot_id, imgui.ImVec2(-1, PLOT_HEIGHT)):
+            return
+        implot.setup_legend(implot.Location_.north, implot.LegendFlags_.outside | implot.LegendFlags_.horizontal)
+        implot.setup_axis(implot.ImAxis_.x1, "", implot.AxisFlags_.no_tick_labels | implot.AxisFlags_.auto_fit)
+        implot.setup_axis(implot.ImAxis_.y1, "")
+        lo, hi = axis_limits(np.concatenate([v for _, v in left]))
+        implot.setup_axis_limits(implot.ImAxis_.y1, lo, hi, implot.Cond_.always)
+        if right:
+            implot.setup_axis(implot.ImAxis_.y2, "", implot.AxisFlags_.opposite)
+            lo, hi = axis_limits(np.concatenate([v for _, v in right]))
+            implot.setup_axis_limits(implot.ImAxis_.y2, lo, hi, implot.Cond_.always)
+        for label, values in left:
+            implot.set_axes(implot.ImAxis_.x1, implot.ImAxis_.y1)
+            implot.plot_line(label, x, np.nan_to_num(np.asarray(values, np.float64)))
+        for label, values in right:
+            implot.set_axes(implot.ImAxis_.x1, implot.ImAxis_.y2)
+            implot.plot_line(label, x, np.nan_to_num(np.asarray(values, np.float64)))
+        implot.end_plot()

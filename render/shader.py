@@ -1,4 +1,4 @@
-"""GLSL programs loaded from ``shaders/``, std140 uniform buffers.
+"""GLSL programs loaded from ``shaders/`` (``warp_sim_render/shaders`` when installed), std140 uniform buffers.
 
 Shader files may ``#include "other.glsl"`` (resolved relative to the including file).  The
 expanded source keeps a table of where each of its lines came from, so a compile error that the
@@ -16,7 +16,16 @@ from typing import ClassVar
 import numpy as np
 from OpenGL import GL
 
-SHADER_DIR = Path(__file__).resolve().parent.parent / "shaders"
+def find_data_dir(name: str, checkout: str) -> Path:
+    """A data folder shipped inside this package (installed), else the checkout's own copy."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here / name, here.parent / checkout):
+        if candidate.is_dir():
+            return candidate
+    return here / name  # missing: the read that needs it names this path
+
+
+SHADER_DIR = find_data_dir("shaders", "shaders")
 
 STAGES = {
     ".vert": GL.GL_VERTEX_SHADER,

@@ -83,6 +83,7 @@ class Viewer:
 
             self.gui = Gui(self.window, controller, self)
         self.frame_ms = self.render_ms = self.upload_ms = self.draw_ms = 0.0
+        self.frames_done = 0  # frame_ms means something from the second frame on
         self.contact_count = 0
         self.sync_timings = True  # glFinish before reading the clock, so draw time is real
         self.profile_passes = False  # also glFinish after each pass, filling pass_ms (benchmarks)
@@ -315,10 +316,11 @@ class Viewer:
         if measure:
             self.controller.measure(self.render_ms, with_energy=self.controller.body_count <= 200_000)
         self.frame_ms = (time.perf_counter() - now) * 1e3
+        self.frames_done += 1
 
     def _title(self):
         c = self.controller
-        if self.window.visible and c.sim.step_count % 30 == 0:
+        if self.window.visible and c.sim.step_count % 30 == 0 and self.frames_done >= 2:
             self.window.set_title(f"warp_sim demo  step {c.sim.step_count}  {1000.0 / max(self.frame_ms, 1e-3):.0f} fps")
 
     def run(self, frames: int | None = None, record_dir=None, screenshot=None):

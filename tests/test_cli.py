@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from warp_sim.cli import main
+from warp_sim.recording import load_run
 from warp_sim.run import format_summary, record_steps, run
 from warp_sim.scene import load_scene
 
@@ -164,7 +165,11 @@ def test_non_finite_run_names_body_and_step(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert err.startswith(f"error: {path}: body 1 (sphere) became non-finite at step 1")
     assert "[[body]] #2" in err
-    assert not (tmp_path / "r.npz").exists()
+    # the frames before the failure are kept, and the file says where and why the run stopped
+    run = load_run(tmp_path / "r.npz")
+    assert run["summary"]["stop_reason"] == "non_finite" and run["summary"]["stop_step"] == 1
+    assert "became non-finite at step 1" in run["summary"]["stop_detail"]
+    assert run["time"].tolist() == [0.0] and run["position"].shape == (1, 4, 3)
 
 
 def run_module(*args, cwd):

@@ -18,8 +18,11 @@ import numpy as np
 import pytest
 import warp as wp
 
-from render.controller import PARAMS, DemoController, builtin_scene
-from warp_sim.terrain import FourierTerrain, PlaneTerrain, fourier_normal, fourier_sample
+from warp_sim.render_package import ensure_render_package
+
+ensure_render_package()  # the checkout's render/ under its installed name, warp_sim_render
+from warp_sim_render.controller import PARAMS, DemoController, builtin_scene  # noqa: E402
+from warp_sim.terrain import FourierTerrain, PlaneTerrain, fourier_normal, fourier_sample  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -62,8 +65,8 @@ def viewer(display):
     pytest.importorskip("glfw", reason="the viewer needs pyGLFW (pip install -e .[viewer])")
     pytest.importorskip("OpenGL", reason="the viewer needs PyOpenGL (pip install -e .[viewer])")
     pytest.importorskip("imgui_bundle", reason="the viewer needs imgui-bundle (pip install -e .[viewer])")
-    from render.viewer import Viewer
-    from render.window import ContextError
+    from warp_sim_render.viewer import Viewer
+    from warp_sim_render.window import ContextError
 
     controller = DemoController(builtin_scene(), paused=True)
     try:
@@ -90,9 +93,9 @@ def gl_error_free():
 
 def test_shaders_compile_and_link(viewer):
     """Every program links and its uniform blocks have the size of their Python std140 mirrors."""
-    from render.shader import check_block_size, load_program
-    from render.terrain_renderer import terrain_block
-    from render.viewer import camera_block, light_block
+    from warp_sim_render.shader import check_block_size, load_program
+    from warp_sim_render.terrain_renderer import terrain_block
+    from warp_sim_render.viewer import camera_block, light_block
 
     programs = [load_program("terrain.vert", "terrain.tesc", "terrain.tese", "terrain.frag"),
                 load_program("body.vert", "body.frag"), load_program("debug.vert", "debug.frag")]
@@ -112,7 +115,7 @@ def test_shaders_compile_and_link(viewer):
 
 def test_bad_shader_names_file_and_line(viewer, tmp_path):
     """A compile error is raised as ShaderError naming the file and line, also inside an include."""
-    from render.shader import Program, ShaderError
+    from warp_sim_render.shader import Program, ShaderError
 
     common = REPO / "shaders" / "common.glsl"
     bad = tmp_path / "bad.frag"
@@ -174,7 +177,7 @@ def warp_heights(terrain: FourierTerrain, x, z):
 @pytest.fixture
 def capture_terrain(viewer):
     """A small 8 x 8 patch grid with culling off, restoring the viewer's terrain afterwards."""
-    from render.terrain_renderer import TerrainRenderer
+    from warp_sim_render.terrain_renderer import TerrainRenderer
 
     renderer = TerrainRenderer(patches_per_side=8, patch_size=4.0)
     renderer.set_culling(False)
@@ -201,7 +204,7 @@ def test_tessellated_heights_match_warp(viewer, capture_terrain, terrain):
     both sides evaluate the same float32 complex-power recurrence.  The float64 NumPy twin agrees
     to float32 rounding of the same order.
     """
-    from render.terrain_renderer import TessellationSettings
+    from warp_sim_render.terrain_renderer import TessellationSettings
 
     capture_terrain.set_grid_origin(terrain.offset[0] - 16.0, terrain.offset[2] - 16.0)
     capture_terrain.set_tessellation(TessellationSettings(0.0, 1.0, 12.0, 12.0))
@@ -231,7 +234,7 @@ def test_plane_terrain_uses_the_same_pipeline(viewer, capture_terrain):
 def test_patch_edges_match_between_neighbours(viewer, capture_terrain):
     """Outer levels come from edge midpoints: where levels differ between patches, every triangle
     edge on an interior patch boundary still has the identical edge on the other side (no cracks)."""
-    from render.terrain_renderer import TessellationSettings
+    from warp_sim_render.terrain_renderer import TessellationSettings
 
     terrain = FourierTerrain(terms=5, amplitude=1.0)
     capture_terrain.set_grid_origin(-16.0, -16.0)
@@ -276,7 +279,7 @@ def test_patch_edges_match_between_neighbours(viewer, capture_terrain):
 def test_screenshot_shows_terrain_and_bodies(viewer):
     """Bodies are drawn where the camera projects them, in their shape's colour, and the ground
     around them is terrain, not the clear (sky) colour."""
-    from render.viewer import SKY
+    from warp_sim_render.viewer import SKY
 
     c = viewer.controller
     c.reset()
@@ -354,7 +357,7 @@ def test_record_writes_a_frame_sequence(viewer, tmp_path):
 def test_gui_parameter_path_updates_physics_and_terrain_block(viewer):
     """set_param (what the panel calls) changes the simulation; a terrain change reaches the
     Terrain uniform block within the same call; bad values are clamped or refused with a note."""
-    from render.terrain_renderer import MAX_TERMS
+    from warp_sim_render.terrain_renderer import MAX_TERMS
 
     c = viewer.controller
     c.reset()
@@ -423,7 +426,7 @@ def test_set_param_changes_the_simulation():
 
 def test_scene_picker_loads_every_example_scene(viewer):
     """Each examples/scenes/*.toml loads through the picker's path and draws a frame."""
-    from render.controller import list_scenes
+    from warp_sim_render.controller import list_scenes
 
     c = viewer.controller
     scenes = list_scenes()
@@ -534,3 +537,30 @@ def test_demo_screenshot_cli(viewer, tmp_path):
     image = np.asarray(Image.open(out))
     assert image.shape == (120, 160, 3)
     assert image.std() > 5  # not a blank frame
+
+
+def test_demo_replays_a_recorded_run(display, tmp_path):
+    """`--replay run.npz` draws the recorded bodies on the recorded terrain (a subprocess: its own
+    GL context), and at the run's last frame the picture differs from its first."""
+    pytest.importorskip("imgui_bundle", reason="the demo needs imgui-bundle (pip install -e .[viewer])")
+    from PIL import Image
+
+    from warp_sim.cli import main as cli_main
+
+    run = tmp_path / "run.npz"
+    assert cli_main(["run", str(REPO / "examples" / "scenes" / "bounce.toml"), "--out", str(run),
+                     "--duration", "1", "--record-every", "6", "--quiet"]) == 0
+    env = {**os.environ, "DISPLAY": display, "PYTHONPATH": str(REPO)}
+    images = []
+    for frames in (1, 40):  # headless replays advance 1/60 s a frame: 40 frames end past 0.65 s
+        out = tmp_path / f"replay_{frames}.png"
+        done = subprocess.run([sys.executable, "-m", "warp_sim.demo", "--replay", str(run), "--screenshot", str(out),
+                               "--frames", str(frames), "--size", "320x240", "--no-gui"], env=env,
+                              capture_output=True, text=True, timeout=300)
+        if done.returncode == 1 and "OpenGL" in done.stderr:
+            pytest.skip(f"no OpenGL 4.1 core context: {done.stderr.strip()}")
+        assert done.returncode == 0, done.stderr
+        images.append(np.asarray(Image.open(out).convert("RGB"), dtype=np.float64))
+    assert images[0].std() > 10.0
+    changed = np.any(np.abs(images[0] - images[1]) > 30, axis=2).mean()
+    assert changed > 0.001, "the replay did not move the ball"

@@ -254,8 +254,8 @@ def test_load_scene_name_defaults_to_file_stem(tmp_path):
 # Layouts ----------------------------------------------------------------------------------------
 
 
-def layout_scene(layouts, terrain=None, seed=0):
-    data = {"sim": {"seed": seed}, "layout": layouts}
+def layout_scene(layouts, terrain=None, seed=0, allow_overlap=False):
+    data = {"sim": {"seed": seed, "allow_initial_overlap": allow_overlap}, "layout": layouts}
     if terrain is not None:
         data["terrain"] = terrain
     return parse_scene(data, "layout.toml")
@@ -280,7 +280,8 @@ def test_layout_body_counts(layout, count):
 def test_bodies_then_layouts_and_their_origins():
     """[[body]] tables come first, then layouts in order; body_origin maps an index back."""
     data = {"body": [{"shape": "sphere", "radius": 0.1}],
-            "layout": [{"type": "stack", "count": 2}, {"type": "chain", "count": 3}]}
+            "layout": [{"type": "stack", "count": 2, "position": [5.0, 0.0]},
+                       {"type": "chain", "count": 3, "start": [0.0, 5.0]}]}
     scene = parse_scene(data)
     assert scene.body_count == 6
     assert scene.body_origin(0) == "[[body]] #1"
@@ -336,9 +337,12 @@ def test_grid_clearance_puts_every_body_above_the_terrain(terrain):
 def test_stack_and_pyramid_rest_on_the_ground():
     """With position [x, z] the bottom boxes rest on the highest ground under them; boxes touch."""
     terrain = {"kind": "fourier", "amplitude": 1.0}
-    scene = layout_scene([{"type": "stack", "count": 3, "position": [1.0, 2.0],
-                           "half_extents": [0.2, 0.1, 0.3]},
-                          {"type": "pyramid", "base": 3, "position": [-2.0, 0.0, 5.0], "gap": 0.05}], terrain)
+    # the pyramid is placed at y = 0, partly inside this terrain: allowed, with a warning
+    with pytest.warns(UserWarning, match=r"body 3 \(\[\[layout\]\] #2 \(pyramid\).* inside the terrain"):
+        scene = layout_scene([{"type": "stack", "count": 3, "position": [1.0, 2.0],
+                               "half_extents": [0.2, 0.1, 0.3]},
+                              {"type": "pyramid", "base": 3, "position": [-2.0, 0.0, 5.0], "gap": 0.05}], terrain,
+                             allow_overlap=True)
     t = scene.terrain
     stack = scene.builder.bodies[:3]
     corners = body_corners(stack[0])

@@ -1,4 +1,15 @@
-"""ModelBuilder: collects bodies on the host, then uploads one static Model."""
+"""ModelBuilder: collects bodies on the host, then uploads one static Model.
+
+Every value is checked with the rules of the scene files (validation.py): ``add_sphere(-1.0)``
+raises ``ValueError: radius must be a positive finite number, got -1.0``.  Beyond the per-key
+rules, a body whose mass, inertia or their inverses are not finite, non-zero float32 numbers is
+refused (a sphere of radius 1e-30 has an inertia that rounds to 0 in float32, and every energy
+would turn into NaN).
+
+``add_bodies`` adds many bodies from NumPy arrays, checked column by column, and gives bit for
+bit the bodies that the same ``add_sphere`` / ``add_box`` calls give.  Bodies are stored as
+columns (``columns()``); ``bodies`` is a list-like view of one dict per body.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +21,13 @@ import numpy as np
 from .model import Model
 from .terrain import NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
+from .validation import BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, ValidationError, check, check_array, check_fields
+
+FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+COLUMNS = ("shape", "size", "mass", "position", "orientation", "velocity", "angular_velocity", "restitution",
+           "friction", "static")
+_WIDTH = {"size": 3, "position": 3, "orientation": 4, "velocity": 3, "angular_velocity": 3}
 
 
 @dataclass
@@ -23,6 +41,9 @@ class Material:
     friction_model: str = "coulomb"
     slipperiness: float = 0.5
     rolling_resistance: float = 0.0
+
+    def __post_init__(self):
+        check_fields(self, MATERIAL_SCHEMA, "Material")
 
     def effective_friction(self) -> float:
         if FRICTION_MODELS[self.friction_model] == FRICTION_SLIPPERINESS:
@@ -41,6 +62,16 @@ def quat_to_matrix(q) -> np.ndarray:
     )
 
 
+def quats_to_matrices(q: np.ndarray) -> np.ndarray:
+    """(n, 4) quaternions -> (n, 3, 3), the same arithmetic as quat_to_matrix."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=1)
+
+
 def box_checkpoints(half_extents, per_edge: int) -> np.ndarray:
     """Points on the box surface: an even per_edge^3 lattice, keeping those on a face.
 
@@ -48,10 +79,74 @@ def box_checkpoints(half_extents, per_edge: int) -> np.ndarray:
     is always a corner); 3 adds edge midpoints and face centres (26 points), and so on.  The
     spacing must stay below the terrain's feature size for the thesis's method to be accurate.
     """
+    return unit_box_checkpoints(per_edge) * np.asarray(half_extents, dtype=np.float64)
+
+
+def unit_box_checkpoints(per_edge: int) -> np.ndarray:
     t = np.linspace(-1.0, 1.0, per_edge)
     g = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
-    on_surface = np.any(np.abs(g) == 1.0, axis=1)
-    return g[on_surface] * np.asarray(half_extents, dtype=np.float64)
+    return g[np.any(np.abs(g) == 1.0, axis=1)]
+
+
+def inertia_box(mass: float, half_extents) -> np.ndarray:
+    w, hgt, l = 2.0 * np.asarray(half_extents, dtype=np.float64)
+    return mass / 12.0 * np.array([hgt * hgt + l * l, w * w + l * l, w * w + hgt * hgt])
+
+
+def body_inertia(shape: np.ndarray, size: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """(n, 3) principal inertia: sphere 2/5 m r^2, box m/12 (h^2 + l^2, ...) (full extents)."""
+    full = 2.0 * size
+    sq = full * full
+    box = (mass / 12.0)[:, None] * np.stack([sq[:, 1] + sq[:, 2], sq[:, 0] + sq[:, 2], sq[:, 0] + sq[:, 1]], axis=1)
+    r = size[:, 0]
+    sphere = np.repeat((0.4 * mass * r * r)[:, None], 3, axis=1)
+    return np.where((shape == SHAPE_SPHERE)[:, None], sphere, box)
+
+
+def check_derived(shape, size, mass, where: str = "", index_base: int | None = None):
+    """Refuse bodies whose mass, inertia or inverses are not finite, non-zero float32 numbers."""
+    inertia = body_inertia(shape, size, mass)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
+        values = np.concatenate([mass[:, None], inertia, 1.0 / mass[:, None], 1.0 / inertia], axis=1)
+        good = np.all(np.isfinite(values) & (np.abs(values) <= FLOAT32_MAX) & (np.abs(values) >= FLOAT32_TINY),
+                      axis=1)
+    if np.all(good):
+        return
+    i = int(np.argmin(good))
+    what = f"radius {size[i, 0]:g}" if shape[i] == SHAPE_SPHERE else f"half_extents {list(map(float, size[i]))}"
+    label = f"body {i} " if index_base is not None else ""
+    prefix = f"{where} " if where else ""
+    raise ValidationError(
+        f"{prefix}{label}{what} with mass {mass[i]:g} gives inertia {list(map(float, inertia[i]))} and mass "
+        f"{mass[i]:g}, not all finite non-zero float32 numbers (their inverses must be too); use a size and mass "
+        f"nearer 1 (SI units)")
+
+
+class _BodyView:
+    """``builder.bodies``: one dict per body, made on demand from the columns."""
+
+    def __init__(self, builder: "ModelBuilder"):
+        self._builder = builder
+
+    def __len__(self):
+        return self._builder.body_count
+
+    def _row(self, i: int) -> dict:
+        c = self._builder.columns()
+        return {key: (c[key][i].copy() if key in _WIDTH else c[key][i].item()) for key in COLUMNS}
+
+    def __getitem__(self, index):
+        n = len(self)
+        if isinstance(index, slice):
+            return [self._row(i) for i in range(*index.indices(n))]
+        if index < 0:
+            index += n
+        if not 0 <= index < n:
+            raise IndexError("body index out of range")
+        return self._row(index)
+
+    def __iter__(self):
+        return (self._row(i) for i in range(len(self)))
 
 
 class ModelBuilder:
@@ -60,41 +155,194 @@ class ModelBuilder:
     def __init__(self, material: Material | None = None):
         self.material = material or Material()
         self.terrain: Terrain = NoTerrain()
-        self.bodies: list[dict] = []
+        self._blocks: list[dict] = []  # column blocks, one per add_bodies (or per run of single adds)
+        self._rows: list[tuple] = []  # single adds not yet in a block
+        self._count = 0
 
     def set_terrain(self, terrain: Terrain):
         self.terrain = terrain
 
+    @property
+    def body_count(self) -> int:
+        return self._count
+
+    @property
+    def bodies(self) -> _BodyView:
+        return _BodyView(self)
+
+    @bodies.setter
+    def bodies(self, items):
+        """Replace every body by a list of dicts with the keys of ``COLUMNS`` (as ``bodies`` gives)."""
+        items = list(items)
+        self._blocks, self._rows, self._count = [], [], 0
+        if items:
+            block = {key: np.asarray([b[key] for b in items]) for key in COLUMNS}
+            self._push_block(block)
+
+    def _push_block(self, block: dict):
+        self._flush_rows()
+        self._blocks.append({
+            "shape": np.asarray(block["shape"], np.int32),
+            **{key: np.asarray(block[key], np.float64).reshape(-1, w) for key, w in _WIDTH.items()},
+            "mass": np.asarray(block["mass"], np.float64),
+            "restitution": np.asarray(block["restitution"], np.float64),
+            "friction": np.asarray(block["friction"], np.float64),
+            "static": np.asarray(block["static"], bool),
+        })
+        self._count += len(self._blocks[-1]["shape"])
+
+    def _flush_rows(self):
+        if not self._rows:
+            return
+        rows, self._rows = self._rows, []
+        cols = list(zip(*rows))
+        self._blocks.append({key: np.asarray(col, dtype=(np.int32 if key == "shape" else bool if key == "static"
+                                                         else np.float64))
+                             for key, col in zip(COLUMNS, cols)})
+
+    def columns(self) -> dict:
+        """All bodies as arrays: shape (n) int32, size / position / velocity / angular_velocity (n, 3),
+        orientation (n, 4; as given), mass / restitution / friction (n) float64, static (n) bool."""
+        self._flush_rows()
+        if len(self._blocks) != 1:
+            if not self._blocks:
+                return {key: np.zeros((0, _WIDTH[key]) if key in _WIDTH else 0,
+                                      np.int32 if key == "shape" else bool if key == "static" else np.float64)
+                        for key in COLUMNS}
+            self._blocks = [{key: np.concatenate([b[key] for b in self._blocks]) for key in COLUMNS}]
+        return self._blocks[0]
+
     def _add(self, shape, size, mass, position, orientation, velocity, angular_velocity,
              restitution, friction, static):
-        index = len(self.bodies)
-        self.bodies.append(
-            dict(
-                shape=shape,
-                size=np.asarray(size, dtype=np.float64),
-                mass=float(mass),
-                position=np.asarray(position, dtype=np.float64),
-                orientation=np.asarray(orientation, dtype=np.float64),
-                velocity=np.asarray(velocity, dtype=np.float64),
-                angular_velocity=np.asarray(angular_velocity, dtype=np.float64),
-                restitution=self.material.restitution if restitution is None else float(restitution),
-                friction=self.material.effective_friction() if friction is None else float(friction),
-                static=bool(static),
-            )
-        )
-        return index
+        spec = BODY_SCHEMA
+        mass = check(spec["mass"], mass, "mass")
+        position = check(spec["position"], position, "position")
+        orientation = check(spec["orientation"], orientation, "orientation")
+        velocity = check(spec["velocity"], velocity, "velocity")
+        angular_velocity = check(spec["angular_velocity"], angular_velocity, "angular_velocity")
+        restitution = self.material.restitution if restitution is None else check(
+            spec["restitution"], restitution, "restitution")
+        friction = self.material.effective_friction() if friction is None else check(
+            spec["friction"], friction, "friction")
+        static = check(Boolean(), static, "static")
+        size = np.asarray(size, dtype=np.float64)
+        check_derived(np.array([shape]), size[None], np.array([mass]))
+        self._rows.append((shape, size, mass, position, orientation, velocity, angular_velocity,
+                           float(restitution), float(friction), static))
+        self._count += 1
+        return self._count - 1
 
     def add_sphere(self, radius, mass=1.0, position=(0, 0, 0), orientation=(0, 0, 0, 1),
                    velocity=(0, 0, 0), angular_velocity=(0, 0, 0), restitution=None, friction=None,
                    static=False) -> int:
+        radius = check(BODY_SCHEMA["radius"], radius, "radius")
         return self._add(SHAPE_SPHERE, (radius, 0.0, 0.0), mass, position, orientation, velocity,
                          angular_velocity, restitution, friction, static)
 
     def add_box(self, half_extents, mass=1.0, position=(0, 0, 0), orientation=(0, 0, 0, 1),
                 velocity=(0, 0, 0), angular_velocity=(0, 0, 0), restitution=None, friction=None,
                 static=False) -> int:
+        half_extents = check(BODY_SCHEMA["half_extents"], half_extents, "half_extents")
         return self._add(SHAPE_BOX, half_extents, mass, position, orientation, velocity,
                          angular_velocity, restitution, friction, static)
+
+    def add_bodies(self, shape, size, mass=1.0, position=(0.0, 0.0, 0.0), orientation=None, velocity=None,
+                   angular_velocity=None, restitution=None, friction=None, static=False) -> np.ndarray:
+        """Add n bodies at once; returns their indices.
+
+        shape: "sphere", "box", or an (n) array of those names or of 0 (sphere) / 1 (box).
+        size: a scalar, an (n) or (n, 1) array (a sphere's radius, a cube's half extent), or
+        (3) or (n, 3) rows of half extents (a sphere's row is (r, ignored, ignored)).  A
+        3-array is always one row; give the radii of exactly 3 bodies as (3, 1).
+        mass, restitution, friction, static: a scalar or an (n) array.  position, velocity,
+        angular_velocity: (3) or (n, 3); orientation: (4) or (n, 4) quaternions (x y z w), not
+        all 0.  Every entry is checked with the rules of add_sphere / add_box; the first bad one
+        is named by index, e.g. ``mass[17] must be a positive finite number, got 0.0``.
+        """
+        n = self._bulk_count(shape, size, mass, position, orientation, velocity)
+        codes = {"sphere": SHAPE_SPHERE, "box": SHAPE_BOX}
+        if isinstance(shape, str):
+            if shape not in codes:
+                raise ValidationError(f"shape must be one of sphere, box, got {shape!r}")
+            shapes = np.full(n, codes[shape], np.int32)
+        else:
+            raw = np.asarray(shape)
+            if raw.dtype.kind in "US":
+                bad = ~np.isin(raw, list(codes))
+                if bad.any():
+                    i = int(np.argmax(bad))
+                    raise ValidationError(f"shape[{i}] must be one of sphere, box, got {str(raw[i])!r}")
+                shapes = np.where(raw == "sphere", SHAPE_SPHERE, SHAPE_BOX).astype(np.int32)
+            else:
+                bad = ~np.isin(raw, [SHAPE_SPHERE, SHAPE_BOX])
+                if bad.any():
+                    i = int(np.argmax(bad))
+                    raise ValidationError(f"shape[{i}] must be 0 (sphere) or 1 (box), got {raw[i]!r}")
+                shapes = raw.astype(np.int32)
+            shapes = np.broadcast_to(shapes, (n,)).copy()
+        is_sphere = shapes == SHAPE_SPHERE
+
+        raw_size = np.asarray(size, dtype=np.float64)
+        if raw_size.ndim == 2 and raw_size.shape[1] == 1:
+            raw_size = raw_size[:, 0]
+        if raw_size.ndim == 0 or (raw_size.ndim == 1 and len(raw_size) != 3):
+            sizes = np.repeat(np.broadcast_to(raw_size, (n,))[:, None], 3, axis=1)  # boxes: cubes
+        else:
+            sizes = self._rows_of(raw_size, n, 3, "size").copy()
+        sizes[is_sphere, 1:] = 0.0
+        spec = BODY_SCHEMA
+        check_array(spec["radius"], sizes[is_sphere, 0], "size (radius)")
+        check_array(spec["half_extents"], sizes[~is_sphere], "size (half_extents)", rows=True)
+        masses = check_array(spec["mass"], np.broadcast_to(np.asarray(mass, np.float64), (n,)), "mass")
+        positions = check_array(spec["position"], self._rows_of(position, n, 3, "position"), "position", rows=True)
+        orientations = check_array(spec["orientation"], self._rows_of((0, 0, 0, 1) if orientation is None
+                                                                      else orientation, n, 4, "orientation"),
+                                   "orientation", rows=True)
+        velocities = check_array(spec["velocity"], self._rows_of((0, 0, 0) if velocity is None else velocity,
+                                                                 n, 3, "velocity"), "velocity", rows=True)
+        omegas = check_array(spec["angular_velocity"],
+                             self._rows_of((0, 0, 0) if angular_velocity is None else angular_velocity, n, 3,
+                                           "angular_velocity"), "angular_velocity", rows=True)
+        rest = np.broadcast_to(np.asarray(self.material.restitution if restitution is None else restitution,
+                                          np.float64), (n,))
+        check_array(spec["restitution"], rest, "restitution")
+        fric = np.broadcast_to(np.asarray(self.material.effective_friction() if friction is None else friction,
+                                          np.float64), (n,))
+        check_array(spec["friction"], fric, "friction")
+        statics = np.asarray(static)
+        if statics.dtype != bool:
+            raise ValidationError(f"static must be true or false (a bool or a bool array), got {statics.dtype}")
+        check_derived(shapes, sizes, masses, index_base=0)
+        first = self._count
+        self._push_block({"shape": shapes, "size": sizes, "mass": masses, "position": positions,
+                          "orientation": orientations, "velocity": velocities, "angular_velocity": omegas,
+                          "restitution": rest.copy(), "friction": fric.copy(),
+                          "static": np.broadcast_to(statics, (n,)).copy()})
+        return np.arange(first, first + n)
+
+    @staticmethod
+    def _bulk_count(shape, size, mass, position, orientation=None, velocity=None) -> int:
+        for value, width in ((shape, 0), (mass, 0), (position, 3), (size, 3)):
+            a = np.asarray(value)
+            if (width == 0 and a.ndim == 1) or a.ndim == 2:
+                return len(a)
+        a = np.asarray(size)
+        if a.ndim == 1 and len(a) != 3:
+            return len(a)
+        for value in (orientation, velocity):
+            if value is not None and np.ndim(value) == 2:
+                return len(value)
+        raise ValidationError("add_bodies needs at least one per-body array (shape, mass, position or size) "
+                              "to give the body count")
+
+    @staticmethod
+    def _rows_of(value, n: int, width: int, key: str) -> np.ndarray:
+        a = np.asarray(value, dtype=np.float64)
+        if a.shape == (width,):
+            return np.broadcast_to(a, (n, width))
+        if a.shape != (n, width):
+            raise ValidationError(f"{key} must have shape ({width},) or ({n}, {width}), got {a.shape}")
+        return a
 
     def default_checkpoints_per_edge(self) -> int:
         # On a plane the corners are exact; curved terrain needs points between them.
@@ -102,73 +350,59 @@ class ModelBuilder:
 
     def finalize(self, device="cpu", checkpoints_per_edge: int | None = None) -> Model:
         per_edge = checkpoints_per_edge or self.default_checkpoints_per_edge()
-        n = len(self.bodies)
+        return Model(self.host_arrays(per_edge), self.terrain, device)
+
+    def host_arrays(self, per_edge: int) -> dict:
+        """The Model's host arrays (float32 / int32), computed column-wise."""
+        from .limits import check_terrain_resolution
+
+        c = self.columns()
+        n = len(c["shape"])
+        shape, size, mass = c["shape"], c["size"], c["mass"]
+        is_sphere = shape == SHAPE_SPHERE
+        check_terrain_resolution(self.terrain, c, per_edge)
+        inertia = body_inertia(shape, size, mass)
+        bound = np.where(is_sphere, size[:, 0], np.linalg.norm(size, axis=1))
+        q = c["orientation"] / np.linalg.norm(c["orientation"], axis=1, keepdims=True)
+        rot = quats_to_matrices(q)
+        dynamic = ~c["static"]
         h = {
-            "body_shape": np.zeros(n, np.int32),
-            "body_size": np.zeros((n, 3), np.float32),
-            "body_bound_radius": np.zeros(n, np.float32),
-            "body_inv_mass": np.zeros(n, np.float32),
-            "body_inertia": np.zeros((n, 3), np.float32),
-            "body_inv_inertia": np.zeros((n, 3), np.float32),
-            "body_restitution": np.zeros(n, np.float32),
-            "body_friction": np.zeros(n, np.float32),
+            "body_shape": shape.astype(np.int32),
+            "body_size": size.astype(np.float32),
+            "body_bound_radius": bound.astype(np.float32),
+            "body_inv_mass": np.where(dynamic, 1.0 / mass, 0.0).astype(np.float32),
+            "body_inertia": inertia.astype(np.float32),
+            "body_inv_inertia": np.where(dynamic[:, None], 1.0 / inertia, 0.0).astype(np.float32),
+            "body_restitution": c["restitution"].astype(np.float32),
+            "body_friction": c["friction"].astype(np.float32),
             "body_rolling_resistance": np.full(n, self.material.rolling_resistance, np.float32),
-            "body_checkpoint_start": np.zeros(n, np.int32),
-            "body_checkpoint_count": np.zeros(n, np.int32),
-            "body_pos": np.zeros((n, 3), np.float32),
-            "body_quat": np.zeros((n, 4), np.float32),
-            "body_rot": np.zeros((n, 3, 3), np.float32),
-            "body_vel": np.zeros((n, 3), np.float32),
-            "body_angmom": np.zeros((n, 3), np.float32),
+            "body_pos": c["position"].astype(np.float32),
+            "body_quat": q.astype(np.float32),
+            "body_rot": rot.astype(np.float32),
         }
-        box_points_cache: dict[tuple, np.ndarray] = {}
-        checkpoint_body, checkpoint_local = [], []
-        for i, b in enumerate(self.bodies):
-            m = b["mass"]
-            if b["shape"] == SHAPE_SPHERE:
-                r = b["size"][0]
-                inertia = np.full(3, 0.4 * m * r * r)
-                bound = r
-                points = np.zeros((1, 3))
-            else:
-                inertia = inertia_box(m, b["size"])
-                bound = float(np.linalg.norm(b["size"]))
-                key = tuple(b["size"])
-                if key not in box_points_cache:
-                    box_points_cache[key] = box_checkpoints(b["size"], per_edge)
-                points = box_points_cache[key]
-            q = b["orientation"] / np.linalg.norm(b["orientation"])
-            rot = quat_to_matrix(q)
-            h["body_shape"][i] = b["shape"]
-            h["body_size"][i] = b["size"]
-            h["body_bound_radius"][i] = bound
-            h["body_restitution"][i] = b["restitution"]
-            h["body_friction"][i] = b["friction"]
-            h["body_inertia"][i] = inertia
-            if not b["static"]:
-                h["body_inv_mass"][i] = 1.0 / m
-                h["body_inv_inertia"][i] = 1.0 / inertia
-                # L = R I_body R^T omega
-                h["body_angmom"][i] = rot @ (inertia * (rot.T @ b["angular_velocity"]))
-                h["body_vel"][i] = b["velocity"]
-            h["body_pos"][i] = b["position"]
-            h["body_quat"][i] = q
-            h["body_rot"][i] = rot
-            h["body_checkpoint_start"][i] = len(checkpoint_body)
-            h["body_checkpoint_count"][i] = len(points)
-            checkpoint_body.extend([i] * len(points))
-            checkpoint_local.append(points)
-        h["checkpoint_body"] = np.asarray(checkpoint_body, np.int32)
-        h["checkpoint_local"] = (
-            np.concatenate(checkpoint_local).astype(np.float32) if checkpoint_local else np.zeros((0, 3), np.float32)
-        )
+        # L = R I_body R^T omega; static bodies keep no velocity
+        local = np.einsum("nji,nj->ni", rot, c["angular_velocity"])
+        angmom = np.einsum("nij,nj->ni", rot, inertia * local)
+        h["body_angmom"] = np.where(dynamic[:, None], angmom, 0.0).astype(np.float32)
+        h["body_vel"] = np.where(dynamic[:, None], c["velocity"], 0.0).astype(np.float32)
+
+        unit = unit_box_checkpoints(per_edge)
+        counts = np.where(is_sphere, 1, len(unit)).astype(np.int32)
+        starts = np.zeros(n, np.int64)
+        if n:
+            starts[1:] = np.cumsum(counts[:-1], dtype=np.int64)
+        total = int(counts.sum(dtype=np.int64))
+        local_points = np.zeros((total, 3), np.float32)
+        boxes = np.flatnonzero(~is_sphere)
+        for chunk in np.array_split(boxes, max(1, len(boxes) // 65536)) if len(boxes) else []:
+            rows = (starts[chunk][:, None] + np.arange(len(unit))[None]).ravel()
+            local_points[rows] = (unit[None] * size[chunk][:, None, :]).reshape(-1, 3).astype(np.float32)
+        h["body_checkpoint_start"] = starts.astype(np.int32)
+        h["body_checkpoint_count"] = counts
+        h["checkpoint_body"] = np.repeat(np.arange(n, dtype=np.int32), counts)
+        h["checkpoint_local"] = local_points
         h["checkpoints_per_edge"] = per_edge
-        return Model(h, self.terrain, device)
-
-
-def inertia_box(mass: float, half_extents) -> np.ndarray:
-    w, hgt, l = 2.0 * np.asarray(half_extents, dtype=np.float64)
-    return mass / 12.0 * np.array([hgt * hgt + l * l, w * w + l * l, w * w + hgt * hgt])
+        return h
 
 
 def random_quaternions(rng: np.random.Generator, count: int) -> np.ndarray:

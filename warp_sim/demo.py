@@ -32,6 +32,8 @@ def parse_size(text: str) -> tuple[int, int]:
 def create_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m warp_sim.demo", description=__doc__.split("\n\n")[0])
     p.add_argument("scene", nargs="?", help="scene file (.toml); default examples/scenes/mixed_rain.toml")
+    p.add_argument("--replay", metavar="RUN.npz", help="play a run recorded by 'python -m warp_sim run' "
+                                                       "(play, pause, scrub, speed) on the terrain it ran on")
     p.add_argument("--device", default=None, help="Warp device for the physics: cpu or cuda (default: the scene's)")
     p.add_argument("--screenshot", metavar="PNG", help="render --frames frames in a hidden window, save the last")
     p.add_argument("--frames", type=int, default=None, help="stop after this many frames")
@@ -42,6 +44,7 @@ def create_parser() -> argparse.ArgumentParser:
     p.add_argument("--play", action="store_true", help="start running (interactive runs start paused)")
     p.add_argument("--no-vsync", action="store_true")
     p.add_argument("--samples", type=int, default=4, help="multisampling (0 = off)")
+    p.add_argument("--verbose", action="store_true", help="show Warp's own start-up and compile output")
     p.add_argument("--history-mb", type=float, default=256.0, help="memory budget for time-travel keyframes")
     return p
 
@@ -55,23 +58,42 @@ def main(argv=None) -> int:
         print("error: --frames must be >= 1", file=sys.stderr)
         return 2
 
-    from warp_sim.cli import quiet_warp
+    from warp_sim.quiet import announce_compiles, init_warp
 
-    quiet_warp()
-    from render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
+    init_warp(verbose=args.verbose)
+    announce_compiles()
+    from warp_sim.render_package import ensure_render_package
 
-    scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)
-    try:
-        scene = load_demo_scene(scene_path)
-    except (ValueError, OSError) as exc:  # SceneError is a ValueError: one clear line
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    controller = DemoController(scene, device=args.device, history_budget_mb=args.history_mb,
-                                paused=not (args.play or headless))
-    controller.scene_path = Path(scene_path) if scene_path else None
+    ensure_render_package()
+    from warp_sim_render.controller import DEFAULT_SCENE, DemoController, load_demo_scene
 
-    from render.viewer import Viewer
-    from render.window import ContextError
+    if args.replay:
+        if args.scene:
+            print("error: give a scene file or --replay RUN.npz, not both", file=sys.stderr)
+            return 2
+        from warp_sim_render.replay import ReplayController
+
+        try:
+            # headless renders advance a fixed 1/60 s of the run per frame, so they do not
+            # depend on how fast this machine draws
+            controller = ReplayController(args.replay, device=args.device, playing=True,
+                                          frame_dt=1.0 / 60.0 if headless else None)
+        except (ValueError, OSError) as exc:  # RecordingError is a ValueError
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    else:
+        scene_path = args.scene or (DEFAULT_SCENE if DEFAULT_SCENE.is_file() else None)
+        try:
+            scene = load_demo_scene(scene_path)
+        except (ValueError, OSError) as exc:  # SceneError is a ValueError: one clear line
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        controller = DemoController(scene, device=args.device, history_budget_mb=args.history_mb,
+                                    paused=not (args.play or headless))
+        controller.scene_path = Path(scene_path) if scene_path else None
+
+    from warp_sim_render.viewer import Viewer
+    from warp_sim_render.window import ContextError
 
     try:
         viewer = Viewer(controller, *args.size, visible=not headless, vsync=not args.no_vsync,
@@ -80,9 +102,11 @@ def main(argv=None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     try:
-        viewer.run(frames=args.frames, record_dir=args.record, screenshot=args.screenshot)
+        written = viewer.run(frames=args.frames, record_dir=args.record, screenshot=args.screenshot)
     finally:
         viewer.close()
+    if args.record:
+        print(f"wrote {written} frames to {Path(args.record).resolve() / 'frame_00000.png'} ...")
     if args.screenshot:
         print(f"wrote {args.screenshot}")
     return 0

@@ -2,7 +2,9 @@
 
 Each generator takes the validated table (a dict: the keys of its schema below, defaults
 filled in, keys without a default present only when given), the ModelBuilder, the terrain and a
-numpy Generator, and adds bodies with ``builder.add_sphere`` / ``builder.add_box``.  Problems
+numpy Generator, and adds its bodies with one ``builder.add_bodies`` call (so a million-body grid
+builds in seconds).  The body count is checked against the machine's memory before anything is
+allocated (limits.py): ``count = 1000000000000`` is one line, not a 21.8 TiB allocation error.  Problems
 that involve several keys raise SceneError with a message that starts with the key.  Lengths
 are in m, masses in kg, velocities in m/s; y is up.
 
@@ -64,7 +66,8 @@ import math
 
 import numpy as np
 
-from .builder import ModelBuilder, quat_to_matrix, random_quaternions
+from .builder import ModelBuilder, quat_to_matrix, quats_to_matrices, random_quaternions
+from .limits import check_body_count
 from .scene import Boolean, Choice, Count, Integer, Number, Point, SceneError, Vector, show
 from .terrain import FourierTerrain, PlaneTerrain
 
@@ -143,13 +146,14 @@ def grid(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
         n, ny = count, 1
         nx = math.ceil(math.sqrt(n))
         nz = math.ceil(n / nx)
+    check_body_count(n, f"count = {show(count)}", boxes=n if shape != "sphere" else 0)
 
     if shape == "mix":
         spheres = round(p.get("sphere_fraction", 0.5) * n)
         kinds = rng.permutation(np.array(["sphere"] * spheres + ["box"] * (n - spheres)))
     else:
         kinds = np.full(n, shape)
-    sizes = {k: _shape_size(p, k) for k in set(kinds)}
+    sizes = {k: _shape_size(p, k) for k in set(kinds.tolist())}
     bound = max(bound_radius(k, sizes[k]) for k in sizes)
 
     spacing = p.get("spacing", 3.0 * bound)
@@ -172,36 +176,52 @@ def grid(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
     half_x = 0.5 * (nx - 1) * spacing + max_offset + bound
     half_z = 0.5 * (nz - 1) * spacing + max_offset + bound
     ground = ground_height(terrain, cx - half_x, cx + half_x, cz - half_z, cz + half_z)
-    down = max(down_extent(kinds[i], sizes[kinds[i]], orientations[i]) for i in range(n))
+    is_sphere = kinds == "sphere"
+    size_rows = np.array([sizes[k] for k in ("sphere", "box") if k in sizes])
+    size_of = {k: size_rows[i] for i, k in enumerate(k for k in ("sphere", "box") if k in sizes)}
+    down = 0.0
+    if is_sphere.any():
+        down = float(size_of["sphere"][0])
+    if (~is_sphere).any():
+        rows = quats_to_matrices(orientations[~is_sphere])[:, 1, :]
+        down = max(down, float(np.max(np.abs(rows) @ np.asarray(size_of["box"], dtype=np.float64))))
     y = ground + p["clearance"] + down + iy * spacing
 
-    for i in range(n):
-        _add(builder, kinds[i], sizes[kinds[i]], mass=p["mass"], position=(x[i], y[i], z[i]),
-             orientation=orientations[i], velocity=p["velocity"])
+    body_size = np.empty((n, 3))
+    for k, row in size_of.items():
+        body_size[kinds == k] = row
+    builder.add_bodies(np.where(is_sphere, "sphere", "box"), body_size, mass=p["mass"],
+                       position=np.stack([x, y, z], axis=1), orientation=orientations, velocity=p["velocity"])
 
 
 def stack(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
     h = np.asarray(p["half_extents"])
+    count = p["count"]
+    check_body_count(count, f"count = {count}", boxes=count)
     x, y, z = p["position"]
     if y is None:
         y = ground_height(terrain, x - h[0], x + h[0], z - h[2], z + h[2])
-    for i in range(p["count"]):
-        builder.add_box(h, mass=p["mass"], position=(x, y + h[1] + i * (2.0 * h[1] + p["gap"]), z))
+    ys = y + h[1] + np.arange(count) * (2.0 * h[1] + p["gap"])
+    builder.add_bodies("box", h, mass=p["mass"], position=np.stack([np.full(count, x), ys, np.full(count, z)], axis=1))
 
 
 def pyramid(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
     h = np.asarray(p["half_extents"])
     base, gap = p["base"], p["gap"]
+    count = base * (base + 1) // 2
+    check_body_count(count, f"base = {base}", boxes=count)
     pitch_x, pitch_y = 2.0 * h[0] + gap, 2.0 * h[1] + gap
     x, y, z = p["position"]
     if y is None:
         half_width = 0.5 * base * pitch_x
         y = ground_height(terrain, x - half_width, x + half_width, z - h[2], z + h[2])
-    for row in range(base):
-        boxes = base - row
-        for i in range(boxes):
-            builder.add_box(h, mass=p["mass"], position=(x + (i - 0.5 * (boxes - 1)) * pitch_x,
-                                                         y + h[1] + row * pitch_y, z))
+    rows = np.repeat(np.arange(base), np.arange(base, 0, -1))
+    boxes = base - rows
+    first = np.concatenate([[0], np.cumsum(np.arange(base, 1, -1))]) if base > 1 else np.zeros(1, np.int64)
+    i = np.arange(count) - first[rows]
+    px = x + (i - 0.5 * (boxes - 1)) * pitch_x
+    py = y + h[1] + rows * pitch_y
+    builder.add_bodies("box", h, mass=p["mass"], position=np.stack([px, py, np.full(count, z)], axis=1))
 
 
 def chain(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
@@ -216,7 +236,9 @@ def chain(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
             f"spacing must be at least {2.0 * reach:.6g} (the body's size along direction) so bodies do "
             f"not overlap, got {show(spacing)}"
         )
-    offsets = np.arange(p["count"])[:, None] * spacing * d
+    count = p["count"]
+    check_body_count(count, f"count = {count}", boxes=count if shape == "box" else 0)
+    offsets = np.arange(count)[:, None] * spacing * d
     x, y, z = p["start"]
     if y is None:
         down = down_extent(shape, size, IDENTITY)
@@ -225,9 +247,10 @@ def chain(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
             ground_height(terrain, x + o[0] - r, x + o[0] + r, z + o[2] - r, z + o[2] + r) + down - o[1]
             for o in offsets
         )
-    for i, o in enumerate(offsets):
-        _add(builder, shape, size, mass=p["mass"], position=(x + o[0], y + o[1], z + o[2]),
-             velocity=p["velocity"] if i == 0 else (0.0, 0.0, 0.0))
+    velocity = np.zeros((count, 3))
+    velocity[0] = p["velocity"]
+    builder.add_bodies(shape, np.asarray(size, dtype=np.float64), mass=p["mass"],
+                       position=np.array([x, y, z]) + offsets, velocity=velocity)
 
 
 # ----------------------------------------------------------------------------------------------

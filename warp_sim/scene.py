@@ -22,8 +22,6 @@ with the ``[sim] seed``, so a scene file always gives the same bodies.
 
 from __future__ import annotations
 
-import math
-import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -31,264 +29,18 @@ from pathlib import Path
 import numpy as np
 
 from .builder import Material, ModelBuilder
-from .collide.broad_phase import BROAD_PHASES
-from .simulator import CONTACT_UPDATES, PAIR_SCHEDULES, SOLVERS, SimConfig, Simulator
+from .simulator import SimConfig, Simulator
 from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
-from .types import FRICTION_MODELS, INTEGRATORS, ROTATIONS, SHAPES
+from .validation import (  # noqa: F401  (the specs and schemas are re-exported for layouts.py and tests)
+    BODY_SCHEMA, FLOAT32_MAX, FOURIER_SCHEMA, MATERIAL_SCHEMA, NONE_SCHEMA, PLANE_SCHEMA, SIM_SCHEMA, TERRAIN_KIND,
+    Bad, Boolean, Choice, Count, Integer, Matrix, Number, Pattern, Point, String, ValidationError, Vector, check,
+    is_finite, is_number, show, where_key,
+)
 
-FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-class SceneError(ValueError):
+class SceneError(ValidationError):
     """An invalid scene; the message is one line naming the file, the key and the value."""
-
-
-# ----------------------------------------------------------------------------------------------
-# Value checks.  Each spec turns a raw TOML value into a clean Python value or raises _Bad; the
-# table reader turns that into "<where> <key> must be <description>, got <value>".
-
-
-class _Bad(Exception):
-    pass
-
-
-def show(value) -> str:
-    """A value as it would be written in TOML, cut to one short line."""
-    if isinstance(value, bool):
-        text = "true" if value else "false"
-    elif isinstance(value, (list, tuple)):
-        text = "[" + ", ".join(show(v) for v in value) + "]"
-    elif isinstance(value, dict):
-        text = "a table {" + ", ".join(str(k) for k in value) + "}"
-    elif isinstance(value, np.ndarray):
-        text = show(value.tolist())
-    else:
-        text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-def is_number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def is_finite(value) -> bool:
-    try:
-        return math.isfinite(value) and abs(value) <= FLOAT32_MAX
-    except OverflowError:  # an int too large for a float
-        return False
-
-
-def _range_text(ge, gt, le) -> str:
-    parts = []
-    if gt is not None:
-        parts.append(f"> {gt:g}")
-    if ge is not None:
-        parts.append(f">= {ge:g}")
-    if le is not None:
-        parts.append(f"<= {le:g}")
-    return " and ".join(parts)
-
-
-@dataclass(frozen=True)
-class Number:
-    """A finite number (int or float, never bool) -> float, with optional bounds."""
-
-    default: float | None = None
-    gt: float | None = None
-    ge: float | None = None
-    le: float | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        if self.ge is not None and self.le is not None:
-            return f"a number in [{self.ge:g}, {self.le:g}]"
-        if self.gt == 0 and self.le is None:
-            return "a positive finite number"
-        bounds = _range_text(self.ge, self.gt, self.le)
-        return f"a finite number {bounds}" if bounds else "a finite number"
-
-    def convert(self, value):
-        if not is_number(value) or not is_finite(value):
-            raise _Bad
-        v = float(value)
-        if (self.gt is not None and not v > self.gt) or (self.ge is not None and v < self.ge) or (
-            self.le is not None and v > self.le
-        ):
-            raise _Bad
-        return v
-
-
-@dataclass(frozen=True)
-class Integer:
-    """A TOML integer (never bool, never a float) with optional bounds."""
-
-    default: int | None = None
-    ge: int | None = None
-    le: int | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        if self.ge is not None and self.le is not None:
-            return f"an integer in [{self.ge}, {self.le}]"
-        bounds = _range_text(self.ge, None, self.le)
-        return f"an integer {bounds}" if bounds else "an integer"
-
-    def convert(self, value):
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise _Bad
-        if (self.ge is not None and value < self.ge) or (self.le is not None and value > self.le):
-            raise _Bad
-        return int(value)
-
-
-@dataclass(frozen=True)
-class Vector:
-    """``n`` finite numbers -> tuple of floats; ``positive``: every entry > 0; ``nonzero``: not all 0."""
-
-    n: int
-    default: tuple | None = None
-    positive: bool = False
-    nonzero: bool = False
-    required: bool = False
-
-    def describe(self) -> str:
-        if self.positive:
-            return f"{self.n} positive finite numbers"
-        if self.nonzero:
-            return f"a non-zero vector of {self.n} finite numbers"
-        return f"{self.n} finite numbers"
-
-    def convert(self, value):
-        if not isinstance(value, (list, tuple)) or len(value) != self.n:
-            raise _Bad
-        if not all(is_number(v) and is_finite(v) for v in value):
-            raise _Bad
-        out = tuple(float(v) for v in value)
-        if self.positive and not all(v > 0 for v in out):
-            raise _Bad
-        if self.nonzero and not any(v != 0 for v in out):
-            raise _Bad
-        return out
-
-
-@dataclass(frozen=True)
-class Point:
-    """[x, y, z], or [x, z] for "rest on the terrain" -> (x, y or None, z)."""
-
-    default: tuple | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "2 finite numbers [x, z] or 3 finite numbers [x, y, z]"
-
-    def convert(self, value):
-        if not isinstance(value, (list, tuple)) or len(value) not in (2, 3):
-            raise _Bad
-        v = Vector(len(value)).convert(value)
-        return (v[0], None, v[1]) if len(v) == 2 else v
-
-
-@dataclass(frozen=True)
-class Choice:
-    options: tuple[str, ...]
-    default: str | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "one of " + ", ".join(self.options)
-
-    def convert(self, value):
-        if not isinstance(value, str) or value not in self.options:
-            raise _Bad
-        return value
-
-
-@dataclass(frozen=True)
-class Boolean:
-    default: bool | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "true or false"
-
-    def convert(self, value):
-        if not isinstance(value, bool):
-            raise _Bad
-        return value
-
-
-@dataclass(frozen=True)
-class String:
-    default: str | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "a string"
-
-    def convert(self, value):
-        if not isinstance(value, str):
-            raise _Bad
-        return value
-
-
-@dataclass(frozen=True)
-class Pattern:
-    """A string matching ``regex`` (full match); ``text`` describes it."""
-
-    regex: str
-    text: str
-    default: str | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return self.text
-
-    def convert(self, value):
-        if not isinstance(value, str) or not re.fullmatch(self.regex, value):
-            raise _Bad
-        return value
-
-
-@dataclass(frozen=True)
-class Matrix:
-    """A rectangular 2-D array of finite numbers -> float64 ndarray (its shape is checked by the caller)."""
-
-    default: None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "a 2-D array (a list of equal-length lists) of finite numbers"
-
-    def convert(self, value):
-        if not isinstance(value, (list, tuple)) or not value:
-            raise _Bad
-        if not all(isinstance(row, (list, tuple)) and len(row) == len(value[0]) and row for row in value):
-            raise _Bad
-        if not all(is_number(v) and is_finite(v) for row in value for v in row):
-            raise _Bad
-        return np.asarray(value, dtype=np.float64)
-
-
-@dataclass(frozen=True)
-class Count:
-    """A total count (int >= 1) or per-axis counts [nx, ny, nz] (ints >= 1)."""
-
-    default: int | None = None
-    required: bool = False
-
-    def describe(self) -> str:
-        return "an integer >= 1 or 3 integers [nx, ny, nz] >= 1"
-
-    def convert(self, value):
-        if isinstance(value, (list, tuple)):
-            if len(value) != 3:
-                raise _Bad
-            return tuple(Integer(ge=1).convert(v) for v in value)
-        return Integer(ge=1).convert(value)
-
-
-def where_key(where: str, key: str) -> str:
-    return f"{where} {key}" if where else key
 
 
 def read_key(table: dict, key: str, spec, where: str):
@@ -297,11 +49,7 @@ def read_key(table: dict, key: str, spec, where: str):
         if spec.required:
             raise SceneError(f"{where_key(where, key)} is required ({spec.describe()})")
         return spec.default
-    value = table[key]
-    try:
-        return spec.convert(value)
-    except _Bad:
-        raise SceneError(f"{where_key(where, key)} must be {spec.describe()}, got {show(value)}") from None
+    return check(spec, table[key], key, where, error=SceneError)
 
 
 def read_table(table, schema: dict, where: str) -> dict:
@@ -320,86 +68,9 @@ def read_table(table, schema: dict, where: str) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------
-# Schemas.  Defaults of [sim], [terrain] and [material] stay in SimConfig, FourierTerrain,
-# PlaneTerrain and Material: a key that is not given is not passed on.  [sim] holds every
-# SimConfig field (a test keeps the two in step).
+# Schemas: validation.py holds them (one copy for scene files and the Python API).
 
 TOP_KEYS = ("name", "sim", "terrain", "material", "body", "layout")
-
-SIM_SCHEMA = {
-    "dt": Number(gt=0),
-    "substeps": Integer(ge=1),
-    "gravity": Vector(3),
-    "duration": Number(gt=0),
-    "integrator": Choice(tuple(INTEGRATORS)),
-    "rotation": Choice(tuple(ROTATIONS)),
-    "device": Pattern(r"cpu|cuda(:\d+)?", "'cpu', 'cuda' or 'cuda:N'"),
-    "seed": Integer(ge=0),
-    "iterations": Integer(ge=1),
-    "relax_iterations": Integer(ge=0),
-    "contact_hertz": Number(gt=0),
-    "damping_ratio": Number(ge=0),
-    "max_push_velocity": Number(gt=0),
-    "restitution_threshold": Number(ge=0),
-    "convergence_tolerance": Number(ge=0),
-    "speculative_margin": Number(ge=0),
-    "solver": Choice(SOLVERS),
-    "sleep": Boolean(),
-    "sleep_velocity": Number(gt=0),
-    "sleep_time": Number(gt=0),
-    "body_contact": Boolean(),
-    "broad_phase": Choice(tuple(BROAD_PHASES)),
-    "contact_max": Integer(ge=0),
-    "contact_update": Choice(CONTACT_UPDATES),
-    "pair_schedule": Choice(PAIR_SCHEDULES),
-}
-
-TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")
-
-FOURIER_SCHEMA = {
-    "kind": TERRAIN_KIND,
-    "terms": Integer(ge=1, le=32),
-    "frequency": Number(gt=0),
-    "amplitude": Number(ge=0),
-    "phase": Number(),
-    "seed": Integer(ge=0),
-    "scale": Vector(3, positive=True),
-    "offset": Vector(3),
-    "amplitudes": Matrix(),
-    "phases": Matrix(),
-    "checkpoints_per_edge": Integer(ge=2),
-}
-
-PLANE_SCHEMA = {
-    "kind": TERRAIN_KIND,
-    "normal": Vector(3, nonzero=True),
-    "offset": Number(),
-    "checkpoints_per_edge": Integer(ge=2),
-}
-
-NONE_SCHEMA = {"kind": TERRAIN_KIND}
-
-MATERIAL_SCHEMA = {
-    "restitution": Number(ge=0, le=1),
-    "friction": Number(ge=0),
-    "friction_model": Choice(tuple(FRICTION_MODELS)),
-    "slipperiness": Number(ge=0, le=1),
-    "rolling_resistance": Number(ge=0),
-}
-
-BODY_SCHEMA = {
-    "shape": Choice(tuple(SHAPES), required=True),
-    "radius": Number(gt=0),
-    "half_extents": Vector(3, positive=True),
-    "mass": Number(default=1.0, gt=0),
-    "position": Vector(3, default=(0.0, 0.0, 0.0)),
-    "orientation": Vector(4, default=(0.0, 0.0, 0.0, 1.0), nonzero=True),
-    "velocity": Vector(3, default=(0.0, 0.0, 0.0)),
-    "angular_velocity": Vector(3, default=(0.0, 0.0, 0.0)),
-    "restitution": Number(ge=0, le=1),
-    "friction": Number(ge=0),
-    "static": Boolean(default=False),
-}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -423,7 +94,7 @@ class Scene:
 
     @property
     def body_count(self) -> int:
-        return len(self.builder.bodies)
+        return self.builder.body_count
 
     def body_origin(self, index: int) -> str:
         """Which table made body ``index`` (0-based, the simulator's numbering)."""
@@ -457,6 +128,15 @@ def load_scene(path) -> Scene:
     except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{path}: TOML syntax error: {e}") from None
     return parse_scene(data, source=str(path))
+
+
+def parse_scene_text(text: str, source: str = "<scene>") -> Scene:
+    """A scene from TOML text (e.g. the copy a run file or checkpoint keeps)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{source}: TOML syntax error: {e}") from None
+    return parse_scene(data, source=source)
 
 
 def parse_scene(data: dict, source: str = "<scene>") -> Scene:
@@ -497,7 +177,23 @@ def _parse(data: dict, source: str) -> Scene:
 
     if scene.body_count == 0:
         raise SceneError("the scene has no bodies: add [[body]] or [[layout]] tables")
+    _check_overlaps(scene)
     return scene
+
+
+def _check_overlaps(scene: Scene):
+    """Bodies overlapping each other or inside the terrain: an error unless [sim] allow_initial_overlap."""
+    from .overlap import describe_overlaps, find_overlaps
+
+    found = find_overlaps(scene.builder)
+    if not found:
+        return
+    text = describe_overlaps(found, scene.body_origin)
+    if not scene.config.allow_initial_overlap:
+        raise SceneError(f"{text} (set [sim] allow_initial_overlap = true to run anyway)")
+    import warnings
+
+    warnings.warn(f"{scene.source}: {text}", stacklevel=3)
 
 
 def _array_of_tables(data: dict, key: str) -> list:
@@ -522,8 +218,7 @@ def _parse_terrain(table):
         return NoTerrain(), per_edge
     if kind == "plane":
         return PlaneTerrain(**values), per_edge
-    terrain = FourierTerrain(**values)
-    k = terrain.terms
+    k = values.get("terms", FourierTerrain.terms)
     for key in ("amplitudes", "phases"):
         if key in values and values[key].shape != (k, k):
             rows, cols = values[key].shape
@@ -531,7 +226,7 @@ def _parse_terrain(table):
                 f"[terrain] {key} must be a terms x terms ({k} x {k}) array, got a {rows} x {cols} array "
                 f"{show(table[key])}"
             )
-    return terrain, per_edge
+    return FourierTerrain(**values), per_edge
 
 
 def _add_body(builder: ModelBuilder, table, where: str):
@@ -549,10 +244,13 @@ def _add_body(builder: ModelBuilder, table, where: str):
         "velocity": b["velocity"], "angular_velocity": b["angular_velocity"],
         "restitution": b.get("restitution"), "friction": b.get("friction"), "static": b["static"],
     }
-    if shape == "sphere":
-        builder.add_sphere(b["radius"], **common)
-    else:
-        builder.add_box(b["half_extents"], **common)
+    try:
+        if shape == "sphere":
+            builder.add_sphere(b["radius"], **common)
+        else:
+            builder.add_box(b["half_extents"], **common)
+    except ValueError as e:  # the builder's derived checks (float32 mass and inertia)
+        raise SceneError(f"{where} {e}") from None
 
 
 def _add_layout(builder: ModelBuilder, table, index: int, rng: np.random.Generator) -> str:
@@ -569,6 +267,6 @@ def _add_layout(builder: ModelBuilder, table, index: int, rng: np.random.Generat
     del params["type"]
     try:
         generator(params, builder, builder.terrain, rng)
-    except SceneError as e:
+    except ValueError as e:  # SceneError, the builder's checks and the memory estimate
         raise SceneError(f"{where} {e}") from None
     return where

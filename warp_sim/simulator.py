@@ -29,7 +29,6 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_terrain
-from .collide.broad_phase import BROAD_PHASES
 from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
 from .launch import cpu_threads, launch
@@ -37,11 +36,8 @@ from .model import Model
 from .solvers.solver import SoftStepSolver, SolverSettings
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
-
-
-SOLVERS = ("soft_step", "pushout")
-CONTACT_UPDATES = ("step", "substep")
-PAIR_SCHEDULES = ("auto", "domains", "colors")
+from .validation import CONTACT_UPDATES, PAIR_SCHEDULES, SIM_SCHEMA, SOLVERS, STEP_COUNT, check_fields  # noqa: F401
+from .validation import check as check_value
 
 
 class NonFiniteStateError(RuntimeError):
@@ -80,6 +76,16 @@ class SimConfig:
     contact_max: int = 0
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
+    allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
+
+    def __post_init__(self):
+        self.validate()
+
+    def validate(self):
+        """Check every field with the [sim] rules (validation.SIM_SCHEMA); ValueError names the field."""
+        if not isinstance(self.device, str) and self.device is not None:
+            self.device = str(self.device)  # a wp.Device
+        check_fields(self, SIM_SCHEMA, "SimConfig")
 
     def solver_settings(self) -> SolverSettings:
         return SolverSettings(
@@ -110,15 +116,7 @@ class Simulator:
     refresh_sphere_contacts = True
 
     def __init__(self, model: Model, config: SimConfig):
-        if config.solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {config.solver!r}")
-        if config.contact_update not in CONTACT_UPDATES:
-            raise ValueError(f"contact_update must be one of {', '.join(CONTACT_UPDATES)}, "
-                             f"got {config.contact_update!r}")
-        if config.pair_schedule not in PAIR_SCHEDULES:
-            raise ValueError(f"pair_schedule must be one of {', '.join(PAIR_SCHEDULES)}, got {config.pair_schedule!r}")
-        if config.broad_phase not in BROAD_PHASES:
-            raise ValueError(f"broad_phase must be one of {', '.join(BROAD_PHASES)}, got {config.broad_phase!r}")
+        config.validate()  # fields may have been set after construction
         self.model = model
         self.config = config
         self.device = wp.get_device(config.device)
@@ -285,6 +283,7 @@ class Simulator:
 
     def step(self, count: int = 1, check: bool = True):
         """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""
+        count = check_value(STEP_COUNT, count, "count", "Simulator.step")
         for _ in range(count):
             if self.device.is_cuda and self.pairs is None and not self.profile:
                 if self.graph is None:
@@ -371,10 +370,14 @@ class Simulator:
 
         Unknown names raise ValueError naming the field.
         """
-        for key, value in changes.items():
+        for key in changes:
             if not hasattr(self.config, key):
                 raise ValueError(f"unknown simulation setting {key!r}")
+        for key, value in changes.items():
+            check_value(SIM_SCHEMA[key], value, key, "SimConfig")
+        for key, value in changes.items():
             setattr(self.config, key, value)
+        self.config.validate()
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
         self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device,
                                      self.model.body_count)

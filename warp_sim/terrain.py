@@ -53,6 +53,12 @@ class FourierTerrain:
     phases: np.ndarray | None = None
     kind: str = field(default="fourier", init=False)
 
+    def __post_init__(self):
+        from .validation import FOURIER_SCHEMA, check_fields, check_terrain_tables
+
+        check_fields(self, FOURIER_SCHEMA, "FourierTerrain")
+        check_terrain_tables(self, "FourierTerrain")
+
     def base_tables(self) -> tuple[np.ndarray, np.ndarray]:
         """A0 and P tables (k x k), drawn from the seed unless given explicitly."""
         k = self.terms
@@ -173,11 +179,11 @@ class PlaneTerrain:
     kind: str = field(default="plane", init=False)
 
     def __post_init__(self):
+        from .validation import PLANE_SCHEMA, check_fields
+
+        check_fields(self, PLANE_SCHEMA, "PlaneTerrain")
         n = np.asarray(self.normal, dtype=np.float64)
-        length = float(np.linalg.norm(n))
-        if not np.isfinite(length) or length == 0.0:
-            raise ValueError(f"terrain.normal: must be a non-zero finite 3-vector, got {list(self.normal)}")
-        self.normal = tuple(float(v) for v in n / length)
+        self.normal = tuple(float(v) for v in n / np.linalg.norm(n))
 
     def height(self, x, z):
         """Height of the plane above (x, z); only defined for non-vertical planes."""

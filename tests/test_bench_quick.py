@@ -1,0 +1,50 @@
+"""--quick benchmark runs never write into bench/results, and their charts say they were quick."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench import common  # noqa: E402
+
+
+def test_quick_without_out_dir_uses_a_temporary_folder(capsys):
+    folder = common.output_dir(None, True, "scaling")
+    assert folder.is_dir() and folder.resolve() != common.RESULTS.resolve()
+    assert not folder.is_relative_to(common.RESULTS.resolve())
+    assert str(folder) in capsys.readouterr().out
+    folder.rmdir()
+
+
+def test_full_runs_default_to_results(tmp_path):
+    assert common.output_dir(None, False, "scaling") == common.RESULTS
+    assert common.output_dir(tmp_path, False, "scaling") == tmp_path
+    assert common.output_dir(tmp_path, True, "scaling") == tmp_path
+
+
+@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision"])
+def test_quick_into_results_is_refused(bench):
+    import importlib
+
+    module = importlib.import_module(f"bench.{bench}")
+    with pytest.raises(SystemExit, match="--quick results may not go to"):
+        module.main(["--quick", "--out-dir", str(common.RESULTS)])
+
+
+def test_quick_charts_are_labelled(tmp_path):
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    common.label_quick_charts()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    ax.set_title("a chart")
+    fig.savefig(tmp_path / "c.png")
+    texts = [t.get_text() for t in fig.texts]
+    plt.close(fig)
+    assert common.QUICK_LABEL in texts
+    assert "quick" in common.QUICK_LABEL.lower()
