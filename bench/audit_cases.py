@@ -362,4 +362,30 @@ def impact_properties(quick: bool) -> list[dict]:
         # the soft contact allows its own slop; the issue's goal for body-body depth is 1 cm
         rows.append(check("property_no_pass_through", 0, tag, "body-body depth < 1 cm", 0.0, depth, 0.01, "m",
                           "max"))
+    rows += glancing_spheres(quick)
+    return rows
+
+
+def glancing_spheres(quick: bool) -> list[dict]:
+    """Zero gravity, e = 1, mu 0: a ball (r 0.3) grazes a heavier one (offset 0.2 m).  The impulse
+    acts along the line of centres, so angular momentum about the origin and kinetic energy are
+    both kept exactly; a contact normal frozen while the centres turn about each other breaks
+    the first."""
+    rows = []
+    for update in (["step"] if quick else ["step", "substep"]):
+        b = ModelBuilder(Material(restitution=1.0, friction=0.0))
+        b.set_terrain(NoTerrain())
+        b.add_sphere(0.3, 1.0, position=(-2.0, 0.2, 0.0), velocity=(3.0, 0.0, 0.0))
+        b.add_sphere(0.3, 2.0, position=(0.0, 0.0, 0.0))
+        sim = simulate(b, gravity=ZERO_G, sleep=False, contact_update=update)
+        l0, ke0 = angular_momentum(sim), sim.kinetic_energy()
+        sim.step(60)
+        n_sub = 60 * sim.config.substeps
+        tag = f"glancing spheres, contacts once per {update}"
+        # as property_angular_momentum: exact but for float32, 4 eps per substep of |L|
+        rows.append(check("property_angular_momentum", 0, tag, "|L - L0| / |L0| = 0", 0.0,
+                          np.linalg.norm(angular_momentum(sim) - l0) / np.linalg.norm(l0), 4 * n_sub * 2.0**-24, "",
+                          "max"))
+        rows.append(check("property_energy_elastic", 0, tag, "e = 1, mu 0: KE'/KE = 1", 1.0, sim.kinetic_energy() / ke0,
+                          1e-3, ""))
     return rows
