@@ -19,15 +19,33 @@ so the contact solver always works on the velocity that moves the body.
 Rotation: the ODE Y' = f(Y) for Y = R (matrix modes, f = skew(omega(R)) R) or Y = q
 (quaternion mode, f = 1/2 [omega, 0] q) is stepped with the integrator's own scheme:
 
-    explicit_euler, semi_implicit   Y' = Y + h f(Y)                    order 1
+    explicit_euler                  Y' = Y + h f(Y)                    order 1 (the thesis's;
+                                    gains energy: +35 % in 20 s on a tumbling 1x2x3 box)
+    semi_implicit                   implicit midpoint in the body frame (below)  order 2
     verlet                          Y' = Y + h f(Y + h/2 f(Y))         order 2 (explicit midpoint:
                                     omega depends on R, so position-Verlet's split does not apply)
     rk4                             classic 4-stage Runge-Kutta        order 4
 
-Stage values use the additive update the thesis describes (S + h dS), never an exponential map,
-so each method's own error, and the drift of an unrepaired matrix, stay visible.  The repair
-after the step is chosen separately (``rotation``): quaternion renormalisation, none (``matrix``),
-cross-product re-orthonormalisation (``matrix_cross``) or Gram-Schmidt.
+The explicit stages use the additive update the thesis describes (S + h dS), never an
+exponential map, so each method's own error, and the drift of an unrepaired matrix, stay visible.
+
+``semi_implicit`` is the default, so it must keep free-flight energy: it used to share explicit
+Euler's update, which multiplies |omega| by sqrt(1 + (h omega)^2) per step (a box tumbling
+near its middle axis gained 35 % kinetic energy in 20 s and flipped 14 times instead of 3).
+It now takes the implicit midpoint rule of Euler's equations for the body-frame momentum
+Lb = R^T L (the Lie-Poisson midpoint rule):
+
+    m = Lb - h/2 (I^-1 m) x m          (m = (Lb + Lb') / 2, solved by Newton, 2-3 iterations)
+    R' = R cay(h I^-1 m)               (cay(a) = rotation of quaternion (a/2, 1) / |(a/2, 1)|)
+
+cay is exactly orthogonal and Lb' = cay^T Lb is the midpoint rule's own update, so world L is
+untouched (R' Lb' = L), |Lb| is exact and the energy 1/2 Lb.I^-1 Lb is exact too (its change is
+(Lb' - Lb).I^-1 m, a cross product dotted with one of its factors); what is left is the Newton
+residual and float32 round-off.  The orientation error is second order.  For spheres and cubes
+(isotropic inertia) m = Lb at once and the update is the exact rotation by 2 atan(h |omega| / 2).
+
+The repair after the step is chosen separately (``rotation``): quaternion renormalisation, none
+(``matrix``), cross-product re-orthonormalisation (``matrix_cross``) or Gram-Schmidt.
 """
 
 import warp as wp
@@ -100,7 +118,7 @@ def orthonormalize_gram_schmidt(rot: wp.mat33) -> wp.mat33:
 
 @wp.func
 def step_matrix(rot: wp.mat33, inv_inertia: wp.vec3, angmom: wp.vec3, h: float, integrator: int) -> wp.mat33:
-    k1 = matrix_derivative(rot, inv_inertia, angmom)
+    k1 = matrix_derivative(rot, inv_inertia, angmom)  # semi_implicit never gets here
     if integrator == INTEGRATOR_VERLET:
         k2 = matrix_derivative(rot + (0.5 * h) * k1, inv_inertia, angmom)
         return rot + h * k2
@@ -126,6 +144,35 @@ def step_quat(q: wp.quat, inv_inertia: wp.vec3, angmom: wp.vec3, h: float, integ
     return q + h * k1
 
 
+# Newton on m - Lb + h/2 (I^-1 m) x m = 0 from m = Lb: the error squares each iteration, from
+# (h omega)^2 |Lb| after the first, so 4 reach float32 round-off up to h omega ~ 1 (a box hit hard);
+# the loop stops once the residual is at round-off (spheres and cubes: before the first).
+MIDPOINT_NEWTON_ITERATIONS = wp.constant(4)
+MIDPOINT_RESIDUAL = wp.constant(2.0e-7)  # relative to |Lb|: float32 eps plus one rounding
+
+
+@wp.func
+def midpoint_body_omega(angmom_body: wp.vec3, inv_inertia: wp.vec3, h: float) -> wp.vec3:
+    """Body-frame angular velocity I^-1 m at the midpoint of the step (see the module docstring)."""
+    m = angmom_body
+    tol = MIDPOINT_RESIDUAL * wp.length(angmom_body)
+    for _it in range(MIDPOINT_NEWTON_ITERATIONS):
+        w = wp.cw_mul(inv_inertia, m)
+        g = m - angmom_body + (0.5 * h) * wp.cross(w, m)
+        if wp.length(g) <= tol:
+            break
+        # d/dm (I^-1 m) x m = skew(I^-1 m) - skew(m) I^-1
+        jac = wp.identity(n=3, dtype=float) + (0.5 * h) * (wp.skew(w) - wp.skew(m) * wp.diag(inv_inertia))
+        m = m - wp.inverse(jac) * g
+    return wp.cw_mul(inv_inertia, m)
+
+
+@wp.func
+def cayley_quat(omega_body: wp.vec3, h: float) -> wp.quat:
+    a = (0.5 * h) * omega_body
+    return wp.normalize(wp.quat(a[0], a[1], a[2], 1.0))
+
+
 @wp.func
 def integrate_rotation(
     q: wp.quat,
@@ -140,6 +187,18 @@ def integrate_rotation(
 
     In matrix modes the quaternion is derived from the matrix for output only.
     """
+    if integrator == INTEGRATOR_SEMI_IMPLICIT:
+        omega_body = midpoint_body_omega(wp.transpose(rot) * angmom, inv_inertia, h)
+        turn = cayley_quat(omega_body, h)
+        if rotation == ROTATION_QUATERNION:
+            q_mid = wp.normalize(q * turn)  # body-frame increment multiplies on the right
+            return q_mid, wp.quat_to_matrix(q_mid)
+        r_mid = rot * wp.quat_to_matrix(turn)
+        if rotation == ROTATION_MATRIX_CROSS:
+            r_mid = orthonormalize_cross(r_mid)
+        elif rotation == ROTATION_MATRIX_GRAM_SCHMIDT:
+            r_mid = orthonormalize_gram_schmidt(r_mid)
+        return wp.normalize(wp.quat_from_matrix(r_mid)), r_mid
     if rotation == ROTATION_QUATERNION:
         q_new = wp.normalize(step_quat(q, inv_inertia, angmom, h, integrator))
         return q_new, wp.quat_to_matrix(q_new)
