@@ -49,6 +49,9 @@ class Model:
         # c_r r of a sphere (its rolling-resistance torque per unit normal impulse), 0 for a box
         rolling_arm = np.where(host["body_shape"] == 0, host["body_rolling_resistance"] * host["body_size"][:, 0], 0.0)
         self.body_rolling_arm = wp.array(rolling_arm.astype(np.float32), dtype=float, device=device)
+        # a sphere's radius, 0 for a box: sphere pairs are solved on their line of centres (pair_geometry.py)
+        sphere_radius = np.where(host["body_shape"] == 0, host["body_size"][:, 0], 0.0)
+        self.body_sphere_radius = wp.array(sphere_radius.astype(np.float32), dtype=float, device=device)
         self.has_restitution = bool(np.any(host["body_restitution"] > 0.0))
         self.body_checkpoint_start = arr("body_checkpoint_start", wp.int32)
         self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)

@@ -264,6 +264,7 @@ def domain_sweep(
     body_restitution: wp.array(dtype=float),
     body_rolling_resistance: wp.array(dtype=float),
     body_rolling_arm: wp.array(dtype=float),
+    body_sphere_radius: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
     body_checkpoint_count: wp.array(dtype=wp.int32),
     # Settings
@@ -360,7 +361,7 @@ def domain_sweep(
     if d == domain_count:
         for q in range(pair_count):
             solve_one_pair(domain_pair[walk(pair_first, pair_count, q, reverse)], mode, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
                            solver_v, solver_w)
@@ -396,7 +397,7 @@ def domain_sweep(
                          terrain_row_count)
         for k in range(pair_count):
             solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
                            solver_v, solver_w)
@@ -409,9 +410,10 @@ def domain_sweep(
             ij = pair_body[p]
             for side in range(2):
                 if body_domain[ij[side]] == d:
-                    warm_start_pair_side(p, side, body_inv_mass, pair_body, pair_point_count, pair_normal,
-                                         pair_point, pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
-                                         solver_ref_pos, solver_v, solver_w)
+                    warm_start_pair_side(p, side, reset_reference, body_inv_mass, body_sphere_radius, body_pos_in,
+                                         pair_body, pair_point_count, pair_normal, pair_point, pair_depth,
+                                         pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
+                                         solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)
     terrain = mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
     use_bias = int(mode == MODE_SOLVE)
     if mode == MODE_RELAX_CLOSED:
@@ -438,7 +440,7 @@ def domain_sweep(
         else:
             for k in range(pair_count):
                 solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,
-                               body_friction, body_restitution, body_rolling_arm, h, soft, max_push_velocity,
+                               body_friction, body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity,
                                restitution_threshold,
                                pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                                pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,

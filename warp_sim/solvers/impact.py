@@ -45,6 +45,7 @@ import warp as wp
 
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
+from .pair_geometry import pair_point_now
 
 wp.set_module_options({"enable_backward": False})
 
@@ -258,6 +259,7 @@ def impact_pair(
     body_inv_mass: wp.array(dtype=float),
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
+    body_sphere_radius: wp.array(dtype=float),
     # Settings
     h: float,
     restitution_threshold: float,
@@ -275,7 +277,8 @@ def impact_pair(
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
-    """The impact of pair p (its manifold's points; the algebra of pair_solve.py, impulse +P on i)."""
+    """The impact of pair p (its manifold's points, at the current pose: pair_geometry.py; the
+    algebra of pair_solve.py, impulse +P on i)."""
     ij = pair_body[p]
     i = ij[0]
     j = ij[1]
@@ -287,13 +290,14 @@ def impact_pair(
     inv_mj = body_inv_mass[j]
     if inv_mi == 0.0 and inv_mj == 0.0:
         return
-    n = pair_normal[p]
     xi = solver_ref_pos[i]
     xj = solver_ref_pos[j]
-    moved_pi = solver_drift_p[i]
-    moved_pj = solver_drift_p[j]
-    drift_ri = solver_drift_r[i]
-    drift_rj = solver_drift_r[j]
+    dpi = solver_drift_p[i]
+    dpj = solver_drift_p[j]
+    dri = solver_drift_r[i]
+    drj = solver_drift_r[j]
+    radius_i = body_sphere_radius[i]
+    radius_j = body_sphere_radius[j]
     inv_ii = solver_inv_inertia[i]
     inv_ij = solver_inv_inertia[j]
     vi = solver_v[i]
@@ -303,12 +307,10 @@ def impact_pair(
     acc = wp.vec4(NOT_ENGAGED)
     hit = int(0)
     for k in range(count):
-        point = pair_point[p * POINTS + k]
-        ri = point - xi
-        rj = point - xj
-        gap = -pair_depth[p * POINTS + k] + wp.dot((moved_pi + drift_ri * ri) - (moved_pj + drift_rj * rj), n)
-        vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
-        if engaged(gap, vn, h):
+        now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi, dpj,
+                             dri, drj, radius_i, radius_j)
+        vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
+        if engaged(now.separation, vn, h):
             acc[k] = 0.0
             if vn < -restitution_threshold:
                 hit = 1
@@ -317,13 +319,13 @@ def impact_pair(
     for _it in range(IMPACT_ITERATIONS):
         for k in range(count):
             if acc[k] >= 0.0:
-                point = pair_point[p * POINTS + k]
-                ri = point - xi
-                rj = point - xj
-                rni = wp.cross(ri, n)
-                rnj = wp.cross(rj, n)
+                now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj,
+                                     dpi, dpj, dri, drj, radius_i, radius_j)
+                n = now.normal
+                rni = wp.cross(now.arm_i, n)
+                rnj = wp.cross(now.arm_j, n)
                 k_n = inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
-                vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
+                vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), n)
                 new_acc = wp.max(acc[k] - vn / k_n, 0.0)
                 d = new_acc - acc[k]
                 acc[k] = new_acc
@@ -333,33 +335,28 @@ def impact_pair(
                 wj = wj - inv_ij * (rnj * d)
     for k in range(count):
         if acc[k] > 0.0:
-            point = pair_point[p * POINTS + k]
+            now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi,
+                                 dpj, dri, drj, radius_i, radius_j)
+            n = now.normal
             bounce = e * acc[k]
             vi = vi + (inv_mi * bounce) * n
-            wi = wi + inv_ii * (wp.cross(point - xi, n) * bounce)
+            wi = wi + inv_ii * (wp.cross(now.arm_i, n) * bounce)
             vj = vj - (inv_mj * bounce) * n
-            wj = wj - inv_ij * (wp.cross(point - xj, n) * bounce)
+            wj = wj - inv_ij * (wp.cross(now.arm_j, n) * bounce)
     mu = wp.sqrt(body_friction[i] * body_friction[j])
     if mu > 0.0:
-        t0 = wp.vec3(0.0)
-        t1 = wp.vec3(0.0)
-        t2 = wp.vec3(0.0)
-        t3 = wp.vec3(0.0)
+        tangent = wp.mat44(0.0)  # rows: the accumulated tangential impulse of each point (x, y, z, -)
         for _it in range(2):
             for k in range(count):
                 if acc[k] > 0.0:
-                    point = pair_point[p * POINTS + k]
-                    ri = point - xi
-                    rj = point - xj
+                    now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi,
+                                         xj, dpi, dpj, dri, drj, radius_i, radius_j)
+                    n = now.normal
+                    ri = now.arm_i
+                    rj = now.arm_j
                     vr = vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj)
                     vt = vr - wp.dot(vr, n) * n
-                    old_t = t0
-                    if k == 1:
-                        old_t = t1
-                    elif k == 2:
-                        old_t = t2
-                    elif k == 3:
-                        old_t = t3
+                    old_t = wp.vec3(tangent[k, 0], tangent[k, 1], tangent[k, 2])
                     k_t = inv_mi + inv_mj
                     slip = wp.length(vt)
                     if slip > 1.0e-9:
@@ -368,19 +365,14 @@ def impact_pair(
                         rtj = wp.cross(rj, c)
                         k_t = k_t + wp.dot(rti, inv_ii * rti) + wp.dot(rtj, inv_ij * rtj)
                     new_t = coulomb_step(old_t, vt, k_t, mu * (1.0 + e) * acc[k])
-                    if k == 0:
-                        t0 = new_t
-                    elif k == 1:
-                        t1 = new_t
-                    elif k == 2:
-                        t2 = new_t
-                    else:
-                        t3 = new_t
-                    dt_imp = new_t - old_t
-                    vi = vi + inv_mi * dt_imp
-                    wi = wi + inv_ii * wp.cross(ri, dt_imp)
-                    vj = vj - inv_mj * dt_imp
-                    wj = wj - inv_ij * wp.cross(rj, dt_imp)
+                    tangent[k, 0] = new_t[0]
+                    tangent[k, 1] = new_t[1]
+                    tangent[k, 2] = new_t[2]
+                    change = new_t - old_t
+                    vi = vi + inv_mi * change
+                    wi = wi + inv_ii * wp.cross(ri, change)
+                    vj = vj - inv_mj * change
+                    wj = wj - inv_ij * wp.cross(rj, change)
     # only dynamic bodies are written: a static body may sit in many pairs of one colour
     if inv_mi > 0.0:
         solver_v[i] = vi

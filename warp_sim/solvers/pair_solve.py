@@ -9,6 +9,7 @@ import warp as wp
 
 from .coloring import color_range
 from .impact import impact_pair
+from .pair_geometry import pair_point_now
 
 wp.set_module_options({"enable_backward": False})
 
@@ -63,6 +64,7 @@ def solve_one_pair(
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
     body_rolling_arm: wp.array(dtype=float),
+    body_sphere_radius: wp.array(dtype=float),
     h: float,
     soft: wp.vec3,
     max_push_velocity: float,
@@ -82,7 +84,8 @@ def solve_one_pair(
     solver_w: wp.array(dtype=wp.vec3),
 ):
     if mode == MODE_IMPACT:
-        impact_pair(p, body_inv_mass, body_friction, body_restitution, h, restitution_threshold, pair_body,
+        impact_pair(p, body_inv_mass, body_friction, body_restitution, body_sphere_radius, h, restitution_threshold,
+                    pair_body,
                     pair_point_count, pair_normal, pair_point, pair_depth, solver_inv_inertia, solver_ref_pos,
                     solver_drift_p, solver_drift_r, solver_v, solver_w)
         return
@@ -114,19 +117,23 @@ def solve_one_pair(
         pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
     normal_total = float(0.0)
 
+    radius_i = body_sphere_radius[i]
+    radius_j = body_sphere_radius[j]
+
     for k in range(count):
         slot = p * POINTS + k
-        point = pair_point[slot]
-        ri = point - xi
-        rj = point - xj
+        # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
+        now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], xi, xj, drift_pi, drift_pj,
+                             drift_ri, drift_rj, radius_i, radius_j)
+        n = now.normal
+        ri = now.arm_i
+        rj = now.arm_j
         acc = pair_normal_impulse[slot]
         if mode == MODE_WARM_START:
             vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
                                      inv_ij)
         else:
-            # the gap found at the reference pose, grown by how far the anchors have moved apart
-            moved = (drift_pi + drift_ri * ri) - (drift_pj + drift_rj * rj)
-            separation = -pair_depth[slot] + wp.dot(moved, n)
+            separation = now.separation
             # Non-penetration
             bias = float(0.0)
             mass_scale = float(1.0)
@@ -197,37 +204,62 @@ def solve_one_pair(
 def warm_start_pair_side(
     p: int,
     side: int,
+    reset_reference: int,
     body_inv_mass: wp.array(dtype=float),
+    body_sphere_radius: wp.array(dtype=float),
+    body_pos: wp.array(dtype=wp.vec3),
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
     pair_normal: wp.array(dtype=wp.vec3),
     pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_ref_pos: wp.array(dtype=wp.vec3),
+    solver_drift_p: wp.array(dtype=wp.vec3),
+    solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
 ):
     """Pair p's stored impulses applied to one of its bodies (side 0: body i gets +P; side 1: body j
     gets -P).  A warm start touches each body with its own arm and inverse mass only, so the two
     halves of a pair whose bodies belong to two threads can be applied by those two threads
-    (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair."""
-    b = pair_body[p][side]
+    (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair.  The other body's reference
+    pose is being reset by its own thread when ``reset_reference`` is set: it is then read from
+    body_pos (drift zero), as that thread will write it."""
+    ij = pair_body[p]
+    b = ij[side]
     inv_mass = body_inv_mass[b]
     if inv_mass == 0.0:
         return
+    i = ij[0]
+    j = ij[1]
     sign = wp.where(side == 0, 1.0, -1.0)
-    n = pair_normal[p]
-    x = solver_ref_pos[b]
     inv_inertia = solver_inv_inertia[b]
     v = solver_v[b]
     w = solver_w[b]
+    x_i = body_pos[i]
+    x_j = body_pos[j]
+    drift_pi = wp.vec3(0.0)
+    drift_pj = wp.vec3(0.0)
+    drift_ri = wp.mat33(0.0)
+    drift_rj = wp.mat33(0.0)
+    if reset_reference == 0:
+        x_i = solver_ref_pos[i]
+        x_j = solver_ref_pos[j]
+        drift_pi = solver_drift_p[i]
+        drift_pj = solver_drift_p[j]
+        drift_ri = solver_drift_r[i]
+        drift_rj = solver_drift_r[j]
     for k in range(pair_point_count[p]):
         slot = p * POINTS + k
-        impulse = sign * (pair_normal_impulse[slot] * n + pair_tangent_impulse[slot])
+        now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], x_i, x_j, drift_pi, drift_pj,
+                             drift_ri, drift_rj, body_sphere_radius[i], body_sphere_radius[j])
+        arm = wp.where(side == 0, now.arm_i, now.arm_j)
+        impulse = sign * (pair_normal_impulse[slot] * now.normal + pair_tangent_impulse[slot])
         v = v + inv_mass * impulse
-        w = w + inv_inertia * wp.cross(pair_point[slot] - x, impulse)
+        w = w + inv_inertia * wp.cross(arm, impulse)
     solver_v[b] = v
     solver_w[b] = w
 
@@ -244,6 +276,7 @@ def pair_pass(
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
     body_rolling_arm: wp.array(dtype=float),
+    body_sphere_radius: wp.array(dtype=float),
     # Settings
     h: float,
     soft: wp.vec3,
@@ -268,7 +301,7 @@ def pair_pass(
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
         solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution,
-                       body_rolling_arm, h, soft,
+                       body_rolling_arm, body_sphere_radius, h, soft,
                        max_push_velocity, restitution_threshold, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
                        solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)

@@ -247,7 +247,7 @@ class SoftStepSolver:
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, color, c.color_start, c.color_pairs_sorted,
-                    m.body_inv_mass, m.body_friction, m.body_restitution, m.body_rolling_arm,
+                    m.body_inv_mass, m.body_friction, m.body_restitution, m.body_rolling_arm, m.body_sphere_radius,
                     dt, soft, s.max_push_velocity, s.restitution_threshold,
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
                     c.pair_normal_impulse, c.pair_tangent_impulse,
@@ -294,7 +294,8 @@ class SoftStepSolver:
         shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair, g.body_domain,
                   g.body_on_boundary, g.boundary_body_count, g.boundary_body,
                   m.body_shape, m.body_size, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, m.body_friction,
-                  m.body_restitution, m.body_rolling_resistance, m.body_rolling_arm, m.body_checkpoint_start,
+                  m.body_restitution, m.body_rolling_resistance, m.body_rolling_arm, m.body_sphere_radius,
+                  m.body_checkpoint_start,
                   m.body_checkpoint_count,
                   self.gravity, dt, integrator, rotation, int(fresh_contacts), self._make_rows(), int(impacts),
                   self._soft(dt),

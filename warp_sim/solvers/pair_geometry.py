@@ -1,0 +1,72 @@
+"""Where a pair's impulse acts: normal, arms and gap of one contact point at the current pose.
+
+Contacts found once serve several substeps (staged.py): the point and normal were found at the
+reference pose and the gap is grown by how far the two anchors have moved apart since,
+
+    moved = (dp_i + D_i r_i) - (dp_j + D_j r_j),   s = -depth + n . moved.
+
+An impulse P must act at one point for both bodies, or it adds a torque (x_i - x_j + r_i - r_j) x P
+to the pair and angular momentum is not kept in free space.  Applied at arms measured from the
+reference pose, r = p - x_ref, it acts at two points that have drifted apart by ``moved``: a
+glancing elastic hit of two spheres changed L by 5 %.  So each body's arm runs from its current
+centre to the midpoint of the two current anchors:
+
+    r_i' = (I + D_i) r_i - moved / 2,   r_j' = (I + D_j) r_j + moved / 2,
+
+and r_i' + x_i = r_j' + x_j exactly: every pair impulse keeps linear and angular momentum.
+
+Two spheres need no stored geometry at all: their normal is the line of their current centres,
+n = (c_i - c_j) / |c_i - c_j|, the gap |c_i - c_j| - (R_i + R_j), and the arms -R_i n, +R_j n lie
+on that line, so a frictionless impulse turns neither ball (midpoint arms would: they leave the
+line when the balls slide past each other).
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class PairPoint:
+    normal: wp.vec3  # from j to i
+    arm_i: wp.vec3  # from body i's current centre to the point the impulse acts at
+    arm_j: wp.vec3
+    separation: float  # gap now (negative: penetration)
+
+
+@wp.func
+def pair_point_now(
+    n_ref: wp.vec3,
+    point: wp.vec3,
+    depth: float,
+    x_ref_i: wp.vec3,
+    x_ref_j: wp.vec3,
+    drift_p_i: wp.vec3,
+    drift_p_j: wp.vec3,
+    drift_r_i: wp.mat33,
+    drift_r_j: wp.mat33,
+    sphere_radius_i: float,
+    sphere_radius_j: float,
+) -> PairPoint:
+    out = PairPoint()
+    if sphere_radius_i > 0.0 and sphere_radius_j > 0.0:
+        d = (x_ref_i + drift_p_i) - (x_ref_j + drift_p_j)
+        dist = wp.length(d)
+        n = n_ref
+        if dist > 1.0e-9:
+            n = d / dist
+        out.normal = n
+        out.separation = dist - (sphere_radius_i + sphere_radius_j)
+        out.arm_i = -sphere_radius_i * n
+        out.arm_j = sphere_radius_j * n
+        return out
+    ri = point - x_ref_i
+    rj = point - x_ref_j
+    turned_i = ri + drift_r_i * ri
+    turned_j = rj + drift_r_j * rj
+    moved = (drift_p_i + turned_i - ri) - (drift_p_j + turned_j - rj)
+    out.normal = n_ref
+    out.separation = -depth + wp.dot(moved, n_ref)
+    out.arm_i = turned_i - 0.5 * moved
+    out.arm_j = turned_j + 0.5 * moved
+    return out
