@@ -177,7 +177,7 @@ def check_frames_on_disk(frames: int, bodies: int, directory, what: str):
                               f"(--record-every) or run fewer steps")
 
 
-def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str = "terrain"):
+def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str = "terrain", warn: bool = True):
     """Refuse a Fourier terrain float32 cannot evaluate where the bodies are; warn about bumps the
     contact method cannot resolve (see the module docstring)."""
     from .terrain import FourierTerrain
@@ -199,6 +199,8 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
             f"bodies are (within {REACH:g} m of them the phase is off by up to {phase_error:.3g} rad, more than "
             f"{PHASE_TOLERANCE:g}); use frequency <= {best:.3g}")
 
+    if not warn:
+        return
     amp = np.abs(terrain.amplitude_table()) * abs(sy)
     m, n = np.meshgrid(np.arange(terrain.terms), np.arange(terrain.terms), indexing="ij")
     wavenumber = f * np.sqrt((m / sx) ** 2 + (n / sz) ** 2)
