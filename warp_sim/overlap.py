@@ -185,17 +185,21 @@ def find_overlaps(builder, limit: int = 5) -> dict:
             "pair_count": int(hit.sum()), "terrain_count": int(len(under))}
 
 
+def _length(d: float) -> str:
+    return f"{d:.3g} m" if d >= 1.0 else f"{d * 1000:.3g} mm"
+
+
 def describe_overlaps(found: dict, origin=lambda i: f"body {i}") -> str:
     """One line naming the bodies (``origin(i)`` says where body i came from)."""
     parts = []
     if found.get("pairs"):
         a, b, d = found["pairs"][0]
         more = found["pair_count"] - 1
-        parts.append(f"bodies {a} ({origin(a)}) and {b} ({origin(b)}) overlap by {d * 1000:.3g} mm at the start"
+        parts.append(f"bodies {a} ({origin(a)}) and {b} ({origin(b)}) overlap by {_length(d)} at the start"
                      + (f", and {more} more pairs overlap" if more else ""))
     if found.get("terrain"):
         a, d = found["terrain"][0]
         more = found["terrain_count"] - 1
-        parts.append(f"body {a} ({origin(a)}) starts {d * 1000:.3g} mm inside the terrain"
+        parts.append(f"body {a} ({origin(a)}) starts {_length(d)} inside the terrain"
                      + (f", and {more} more bodies do" if more else ""))
     return "; ".join(parts)
