@@ -174,3 +174,12 @@ def test_demo_without_a_gpu_says_so(capsys, monkeypatch):
     err = capsys.readouterr().err
     one_line(err)
     assert "device 'cuda' is not available (0 CUDA devices found); try --device cpu" in err
+
+
+def test_demo_bad_thread_count_is_one_line(capsys, monkeypatch):
+    from warp_sim import demo
+
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "0")
+    monkeypatch.setitem(sys.modules, "render.viewer", None)
+    assert demo.main([]) == 2
+    assert capsys.readouterr().err == "error: WARP_SIM_CPU_THREADS must be a positive integer, got '0'\n"

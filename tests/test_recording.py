@@ -195,3 +195,33 @@ def test_rates_have_three_significant_figures():
     line = format_summary({"steps": 3, "steps_per_s": 0.412, "body_steps_per_s": 4.12, "final_kinetic_energy": 1.0,
                            "max_penetration": 0.0, "stop_reason": "interrupted", "stop_step": 3})
     assert "0.412 steps/s" in line and "4.12 body-steps/s" in line and "stopped: interrupted at step 3" in line
+
+
+def test_ctrl_c_on_the_command_line_keeps_the_frames(mix, tmp_path, capsys, monkeypatch):
+    """Ctrl-C during step 6: exit 130, one line saying where the frames are, and the file has them."""
+    from warp_sim.simulator import Simulator
+
+    step = Simulator.step
+
+    def interrupted_step(self, count=1, check=True):
+        if self.step_count >= 5:
+            raise KeyboardInterrupt
+        step(self, count, check)
+
+    monkeypatch.setattr(Simulator, "step", interrupted_step)
+    out = tmp_path / "run.npz"
+    assert main(["run", str(mix), "--steps", "50", "--out", str(out), "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert err == f"error: interrupted; frames up to step 5 are in '{out}'\n"
+    r = load_run(out)
+    assert r["summary"]["stop_reason"] == "interrupted" and len(r["time"]) == 6
+
+
+def test_simulator_refuses_a_contact_capacity_it_cannot_allocate():
+    from warp_sim import ModelBuilder, SimConfig, Simulator
+
+    b = ModelBuilder()
+    b.add_sphere(0.1)
+    b.add_sphere(0.1, position=(1, 0, 0))
+    with pytest.raises(ValueError, match=r"^SimConfig contact_max = 1000000000000: the simulator needs about"):
+        Simulator(b.finalize("cpu"), SimConfig(contact_max=10**12))

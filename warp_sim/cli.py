@@ -158,6 +158,12 @@ def run_command(args) -> int:
     if total <= start:
         raise CommandError(f"--resume: the checkpoint is at step {start}, at or past the run's end ({total} steps)")
     record_every = args.record_every
+    from .limits import estimate_run_seconds, human_seconds
+
+    seconds = estimate_run_seconds(total - start, scene.config.substeps, scene.body_count)
+    if seconds > 60 and not args.quiet:
+        print(f"{total - start:,} steps of {scene.config.substeps:,} substeps for {scene.body_count:,} bodies: "
+              f"roughly {human_seconds(seconds)} on the CPU", file=sys.stderr)
     frames = (total - start) // record_every + 2
     check_scene_memory(scene, frames_in_memory=min(frames, CHUNK_FRAMES))
     check_frames_on_disk(frames, scene.body_count, out.parent, f"--out '{out}'")

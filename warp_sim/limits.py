@@ -144,6 +144,17 @@ def check_scene_memory(scene, frames_in_memory: int = 0, available: int | None =
     check_memory(parts["total"], f"{keys[main]}: the run", available)
 
 
+def check_simulator_memory(model, config):
+    """Simulator(model, config): the contact buffers and per-body arrays it is about to allocate."""
+    n = model.body_count
+    boxes = int(np.count_nonzero(model.host["body_shape"] == 1))
+    capacity = _pair_capacity(config, n)
+    parts = estimate_bytes(n, boxes, model.host.get("checkpoints_per_edge", 3), capacity)
+    what = (f"SimConfig contact_max = {config.contact_max}: the simulator" if config.contact_max and
+            parts["contact pairs"] >= parts["bodies"] else f"a simulator of {n:,} bodies")
+    check_memory(parts["total"], what)
+
+
 def estimate_run_seconds(steps: int, substeps: int, bodies: int) -> float:
     return float(steps) * substeps * (bodies * BODY_SUBSTEP_S + SUBSTEP_OVERHEAD_S)
 
