@@ -183,3 +183,15 @@ def test_demo_bad_thread_count_is_one_line(capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "render.viewer", None)
     assert demo.main([]) == 2
     assert capsys.readouterr().err == "error: WARP_SIM_CPU_THREADS must be a positive integer, got '0'\n"
+
+
+def test_in_memory_run_refuses_frames_it_cannot_hold():
+    from warp_sim import SimConfig, Simulator
+    from warp_sim.run import run
+
+    b = ModelBuilder()
+    b.add_sphere(0.1)
+    sim = Simulator(b.finalize("cpu"), SimConfig())
+    with pytest.raises(ValueError, match=r"^steps = 5000000000000 with record_every = 1 \(5,000,000,000,002 frames"):
+        run(sim, 5 * 10**12, progress=False)
+    assert sim.step_count == 0

@@ -92,6 +92,13 @@ def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=No
     if checkpoint_every is not None and checkpoint_every < 1:
         raise ValueError(f"checkpoint_every must be an integer >= 1, got {checkpoint_every!r}")
     n = sim.model.body_count
+    if writer is None:  # every frame stays in memory: refuse what will not fit before stepping
+        from .limits import check_memory
+        from .recording import frame_bytes
+
+        frames = int(steps) // record_every + 2
+        check_memory(frames * frame_bytes(n), f"steps = {steps} with record_every = {record_every} "
+                     f"({frames:,} frames of {n:,} bodies kept in memory; stream them with a RunWriter)")
     sink = writer if writer is not None else _MemorySink(n)
     stats = {"frames": 0, "time": 0.0, "ke": 0.0, "pen": 0.0}
 
