@@ -24,7 +24,6 @@ from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHE
 from .validation import BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, ValidationError, check, check_array, check_fields
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
-FLOAT32_MAX = float(np.finfo(np.float32).max)
 COLUMNS = ("shape", "size", "mass", "position", "orientation", "velocity", "angular_velocity", "restitution",
            "friction", "static")
 _WIDTH = {"size": 3, "position": 3, "orientation": 4, "velocity": 3, "angular_velocity": 3}
