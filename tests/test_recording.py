@@ -225,3 +225,52 @@ def test_simulator_refuses_a_contact_capacity_it_cannot_allocate():
     b.add_sphere(0.1, position=(1, 0, 0))
     with pytest.raises(ValueError, match=r"^SimConfig contact_max = 1000000000000: the simulator needs about"):
         Simulator(b.finalize("cpu"), SimConfig(contact_max=10**12))
+
+
+def _start_long_run(scene: Path, out: Path):
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    return subprocess.Popen([sys.executable, "-m", "warp_sim", "run", str(scene), "--steps", "1000000", "--out",
+                             str(out), "--quiet"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def _wait_for_chunks(out: Path, proc, count: int = 1):
+    import time
+
+    deadline = time.monotonic() + 120
+    while len(list(chunk_dir(out).glob("chunk_*.npz"))) < count:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no chunk was written"
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGKILL"])
+def test_a_real_signal_keeps_the_frames(tmp_path, sig):
+    """A real Ctrl-C finishes the file (exit 130); kill -9 leaves whole chunks that load_run reads."""
+    import signal
+
+    scene = tmp_path / "ball.toml"
+    scene.write_text('[sim]\nsleep = false\n[terrain]\nkind = "plane"\n[[body]]\nshape = "sphere"\n'
+                     'radius = 0.1\nposition = [0.0, 1.0, 0.0]\n')
+    out = tmp_path / "run.npz"
+    proc = _start_long_run(scene, out)
+    try:
+        _wait_for_chunks(out, proc)
+        proc.send_signal(getattr(signal, sig))
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    r = load_run(out)
+    frames = len(r["time"])
+    assert frames >= 256
+    np.testing.assert_allclose(r["time"], np.arange(frames) / 60.0, rtol=1e-12)
+    if sig == "SIGINT":
+        assert proc.returncode == 130 and err.splitlines()[-1].startswith("error: interrupted; frames up to step")
+        assert r["summary"]["stop_reason"] == "interrupted" and r["summary"]["stop_step"] == frames - 1
+        assert not chunk_dir(out).exists()
+    else:
+        assert r["summary"]["stop_reason"] == "incomplete" and r["metadata"]["scene_text"] == scene.read_text()
