@@ -274,3 +274,14 @@ def test_a_real_signal_keeps_the_frames(tmp_path, sig):
         assert not chunk_dir(out).exists()
     else:
         assert r["summary"]["stop_reason"] == "incomplete" and r["metadata"]["scene_text"] == scene.read_text()
+
+
+def test_resume_with_another_thread_count_says_so(mix, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "1")
+    assert main(["run", str(mix), "--steps", "2", "--checkpoint-every", "2", "--out", str(tmp_path / "b.npz"),
+                 "--quiet"]) == 0
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "2")
+    assert main(["run", "--resume", str(tmp_path / "b.checkpoint.npz"), "--steps", "4", "--out",
+                 str(tmp_path / "c.npz"), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "written with WARP_SIM_CPU_THREADS=1, resuming with 2: the run goes on validly but not bit-identically" in err

@@ -175,8 +175,13 @@ def run_command(args) -> int:
         except ValueError as e:
             raise CommandError(str(e)) from None
 
+    threads = cpu_threads()
+    if resume_info is not None and resume_info.get("threads", threads) != threads and device == "cpu":
+        # the CPU slab schedule has one slab per thread: another count is another (valid) sweep order
+        print(f"warning: '{args.resume}' was written with WARP_SIM_CPU_THREADS={resume_info['threads']}, resuming "
+              f"with {threads}: the run goes on validly but not bit-identically", file=sys.stderr)
     run_info = {"scene_text": scene_text, "scene_source": str(source), "device": device, "total_steps": total,
-                "record_every": record_every}
+                "record_every": record_every, "threads": threads}
     metadata = provenance(scene_text, sim.config, device,
                           {"scene": scene.name, "scene_source": str(source), "total_steps": total,
                            "record_every": record_every, "resumed_from": args.resume, "start_step": start})
