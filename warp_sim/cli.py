@@ -27,7 +27,8 @@ from pathlib import Path
 import warp as wp
 
 from .contacts import ContactOverflowError
-from .recording import RunWriter, check_output_path, load_checkpoint, restore_checkpoint, save_checkpoint
+from .recording import (RunWriter, check_output_path, chunk_dir, load_checkpoint, restore_checkpoint,
+                        save_checkpoint)
 from .run import format_summary, run, static_record
 from .scene import SceneError, load_scene, parse_scene_text
 from .simulator import NonFiniteStateError, expected_steps
@@ -185,6 +186,9 @@ def run_command(args) -> int:
     metadata = provenance(scene_text, sim.config, device,
                           {"scene": scene.name, "scene_source": str(source), "total_steps": total,
                            "record_every": record_every, "resumed_from": args.resume, "start_step": start})
+    if chunk_dir(out).exists():
+        print(f"warning: replacing the chunks of an unfinished run in '{chunk_dir(out)}' (read them first with "
+              f"load_run('{out}') to keep them)", file=sys.stderr)
     writer = RunWriter(out, sim.model.body_count, static_record(sim), metadata)
     on_checkpoint = (lambda s: save_checkpoint(checkpoint, s, run_info)) if checkpoint else None
     try:
