@@ -24,7 +24,6 @@ from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHE
 from .validation import BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, ValidationError, check, check_array, check_fields
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
-FLOAT32_MAX = float(np.finfo(np.float32).max)
 COLUMNS = ("shape", "size", "mass", "position", "orientation", "velocity", "angular_velocity", "restitution",
            "friction", "static")
 _WIDTH = {"size": 3, "position": 3, "orientation": 4, "velocity": 3, "angular_velocity": 3}
@@ -104,14 +103,17 @@ def body_inertia(shape: np.ndarray, size: np.ndarray, mass: np.ndarray) -> np.nd
 
 
 def check_derived(shape, size, mass, where: str = "", index_base: int | None = None):
-    """Refuse bodies whose mass, inertia or inverses are not finite, non-zero float32 numbers."""
-    inertia = body_inertia(shape, size, mass)
+    """Refuse bodies whose mass, inertia or inverses are not finite, non-zero float32 numbers.
+
+    x and 1/x are both normal float32 numbers exactly when tiny <= x <= 1/tiny (1/tiny < max).
+    """
     with np.errstate(over="ignore", divide="ignore", invalid="ignore", under="ignore"):
-        values = np.concatenate([mass[:, None], inertia, 1.0 / mass[:, None], 1.0 / inertia], axis=1)
-        good = np.all(np.isfinite(values) & (np.abs(values) <= FLOAT32_MAX) & (np.abs(values) >= FLOAT32_TINY),
-                      axis=1)
-    if np.all(good):
-        return
+        inertia = body_inertia(shape, size, mass)
+        low, high = FLOAT32_TINY, 1.0 / FLOAT32_TINY
+        if len(mass) == 0 or (min(inertia.min(), mass.min()) >= low and max(inertia.max(), mass.max()) <= high):
+            return  # NaN compares false, so it falls through to the per-body test
+        values = np.concatenate([mass[:, None], inertia], axis=1)
+        good = np.all((values >= low) & (values <= high), axis=1)
     i = int(np.argmin(good))
     what = f"radius {size[i, 0]:g}" if shape[i] == SHAPE_SPHERE else f"half_extents {list(map(float, size[i]))}"
     label = f"body {i} " if index_base is not None else ""

@@ -29,7 +29,8 @@ import warp as wp
 from .commands import add_commands
 from .contacts import ContactOverflowError
 from .quiet import announce_compiles, init_warp, quiet_warp  # noqa: F401  (quiet_warp: old callers)
-from .recording import RunWriter, check_output_path, load_checkpoint, restore_checkpoint, save_checkpoint
+from .recording import (RunWriter, check_output_path, chunk_dir, load_checkpoint, restore_checkpoint,
+                        save_checkpoint)
 from .run import format_summary, run, static_record
 from .scene import SceneError, load_scene, parse_scene_text
 from .simulator import NonFiniteStateError, expected_steps
@@ -154,6 +155,12 @@ def run_command(args) -> int:
     if total <= start:
         raise CommandError(f"--resume: the checkpoint is at step {start}, at or past the run's end ({total} steps)")
     record_every = args.record_every
+    from .limits import estimate_run_seconds, human_seconds
+
+    seconds = estimate_run_seconds(total - start, scene.config.substeps, scene.body_count)
+    if seconds > 60 and not args.quiet:
+        print(f"{total - start:,} steps of {scene.config.substeps:,} substeps for {scene.body_count:,} bodies: "
+              f"roughly {human_seconds(seconds)} on the CPU", file=sys.stderr)
     frames = (total - start) // record_every + 2
     check_scene_memory(scene, frames_in_memory=min(frames, CHUNK_FRAMES))
     check_frames_on_disk(frames, scene.body_count, out.parent, f"--out '{out}'")
@@ -165,11 +172,19 @@ def run_command(args) -> int:
         except ValueError as e:
             raise CommandError(str(e)) from None
 
+    threads = cpu_threads()
+    if resume_info is not None and resume_info.get("threads", threads) != threads and device == "cpu":
+        # the CPU slab schedule has one slab per thread: another count is another (valid) sweep order
+        print(f"warning: '{args.resume}' was written with WARP_SIM_CPU_THREADS={resume_info['threads']}, resuming "
+              f"with {threads}: the run goes on validly but not bit-identically", file=sys.stderr)
     run_info = {"scene_text": scene_text, "scene_source": str(source), "device": device, "total_steps": total,
-                "record_every": record_every}
+                "record_every": record_every, "threads": threads}
     metadata = provenance(scene_text, sim.config, device,
                           {"scene": scene.name, "scene_source": str(source), "total_steps": total,
                            "record_every": record_every, "resumed_from": args.resume, "start_step": start})
+    if chunk_dir(out).exists():
+        print(f"warning: replacing the chunks of an unfinished run in '{chunk_dir(out)}' (read them first with "
+              f"load_run('{out}') to keep them)", file=sys.stderr)
     writer = RunWriter(out, sim.model.body_count, static_record(sim), metadata)
     on_checkpoint = (lambda s: save_checkpoint(checkpoint, s, run_info)) if checkpoint else None
     try:

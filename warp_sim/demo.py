@@ -15,6 +15,7 @@ imports them.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -49,19 +50,65 @@ def create_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _writable_dir(directory: Path, flag: str, target: Path):
+    probe = directory / f".warp_sim_probe_{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise ValueError(f"{flag}: cannot write '{target}': {e.strerror or e}") from None
+
+
+def check_arguments(args):
+    """Every path and device flag, before a window opens or a frame is rendered (ValueError, one line)."""
+    from warp_sim.cli import check_device
+    from warp_sim.launch import cpu_threads
+
+    cpu_threads()  # WARP_SIM_CPU_THREADS
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be an integer >= 1, got {args.frames}")
+    if args.samples < 0:
+        raise ValueError(f"--samples must be an integer >= 0, got {args.samples}")
+    if not (args.history_mb > 0 and args.history_mb < float("inf")):
+        raise ValueError(f"--history-mb must be a positive finite number, got {args.history_mb}")
+    if args.device is not None:
+        check_device(args.device)
+    if args.screenshot is not None:
+        shot = Path(args.screenshot)
+        if shot.is_dir():
+            raise ValueError(f"--screenshot '{shot}' is a directory; give a file name such as '{shot / 'out.png'}'")
+        if shot.suffix.lower() != ".png":
+            raise ValueError(f"--screenshot must be a .png file, got '{shot}'")
+        if not shot.parent.is_dir():
+            raise ValueError(f"--screenshot: directory '{shot.parent}' does not exist")
+        _writable_dir(shot.parent, "--screenshot", shot)
+    if args.record is not None:
+        record = Path(args.record)
+        if record.exists() and not record.is_dir():
+            raise ValueError(f"--record must be a directory, got the file '{record}'")
+        existing = record
+        while not existing.exists():  # the viewer creates the missing folders
+            existing = existing.parent
+        if not existing.is_dir():
+            raise ValueError(f"--record: '{existing}' is a file, so '{record}' cannot be made")
+        _writable_dir(existing, "--record", record)
+
+
 def main(argv=None) -> int:
     args = create_parser().parse_args(argv)
     headless = args.headless or args.screenshot is not None
     if args.screenshot and args.frames is None:
         args.frames = 1
-    if args.frames is not None and args.frames < 1:
-        print("error: --frames must be >= 1", file=sys.stderr)
-        return 2
 
     from warp_sim.quiet import announce_compiles, init_warp
 
     init_warp(verbose=args.verbose)
     announce_compiles()
+    try:
+        check_arguments(args)
+    except ValueError as exc:  # CommandError and the thread count's error are ValueErrors
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     from warp_sim.render_package import ensure_render_package
 
     ensure_render_package()

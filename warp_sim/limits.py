@@ -144,6 +144,17 @@ def check_scene_memory(scene, frames_in_memory: int = 0, available: int | None =
     check_memory(parts["total"], f"{keys[main]}: the run", available)
 
 
+def check_simulator_memory(model, config):
+    """Simulator(model, config): the contact buffers and per-body arrays it is about to allocate."""
+    n = model.body_count
+    boxes = int(np.count_nonzero(model.host["body_shape"] == 1))
+    capacity = _pair_capacity(config, n)
+    parts = estimate_bytes(n, boxes, model.host.get("checkpoints_per_edge", 3), capacity)
+    what = (f"SimConfig contact_max = {config.contact_max}: the simulator" if config.contact_max and
+            parts["contact pairs"] >= parts["bodies"] else f"a simulator of {n:,} bodies")
+    check_memory(parts["total"], what)
+
+
 def estimate_run_seconds(steps: int, substeps: int, bodies: int) -> float:
     return float(steps) * substeps * (bodies * BODY_SUBSTEP_S + SUBSTEP_OVERHEAD_S)
 
@@ -177,7 +188,7 @@ def check_frames_on_disk(frames: int, bodies: int, directory, what: str):
                               f"(--record-every) or run fewer steps")
 
 
-def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str = "terrain"):
+def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str = "terrain", warn: bool = True):
     """Refuse a Fourier terrain float32 cannot evaluate where the bodies are; warn about bumps the
     contact method cannot resolve (see the module docstring)."""
     from .terrain import FourierTerrain
@@ -199,6 +210,8 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
             f"bodies are (within {REACH:g} m of them the phase is off by up to {phase_error:.3g} rad, more than "
             f"{PHASE_TOLERANCE:g}); use frequency <= {best:.3g}")
 
+    if not warn:
+        return
     amp = np.abs(terrain.amplitude_table()) * abs(sy)
     m, n = np.meshgrid(np.arange(terrain.terms), np.arange(terrain.terms), indexing="ij")
     wavenumber = f * np.sqrt((m / sx) ** 2 + (n / sz) ** 2)

@@ -2,9 +2,9 @@
 
 ``find_overlaps(builder)`` runs in NumPy at build time and scales to millions of bodies:
 
-* Candidate pairs come from a uniform grid of cell size 2 x the largest bounding radius (cell
-  coordinates hashed, sorted, and the 27 neighbouring cells looked up with searchsorted), then
-  the bounding spheres.
+* Candidate pairs come from a uniform grid of cell size 2 x the largest bounding radius (bodies
+  sorted by cell, the cell and 13 neighbours looked up with searchsorted), then the bounding
+  spheres.
 * Sphere-sphere is exact; sphere-box uses the box's closest point to the centre; box-box uses
   the 15 separating axes, whose smallest overlap is the penetration depth of two boxes.
 * Terrain: a sphere overlaps when the surface point straight below (or above) its centre is
@@ -28,39 +28,56 @@ from .types import SHAPE_BOX, SHAPE_SPHERE
 
 TOLERANCE = 1e-3  # m
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float64)
-_HASH = np.array([73856093, 19349663, 83492791], np.int64)
+
+
+def _expand(p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (p[k], q) for q in [lo[k], hi[k])."""
+    counts = np.maximum(hi - lo, 0)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    step = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(p, counts), np.repeat(lo, counts) + step
 
 
 def _candidate_pairs(pos: np.ndarray, bound: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs whose bounding spheres overlap by more than TOLERANCE, each once.
+
+    Cells of 2 x the largest bounding radius get a linear index (the grid padded by one cell, so
+    a neighbour's index is the body's plus a constant); bodies are sorted by it, and the same cell
+    plus 13 of the 26 neighbours (one of each opposite pair: the next cell in z and four rows of
+    three cells adjacent in z, so five key ranges) are looked up with searchsorted.
+    """
     n = len(pos)
+    empty = np.zeros(0, np.int64), np.zeros(0, np.int64)
     if n < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return empty
     cell = max(2.0 * float(bound.max()), 1e-9)
     coords = np.floor(pos / cell).astype(np.int64)
-    keys = np.bitwise_xor.reduce(coords * _HASH, axis=1)
+    coords -= coords.min(axis=0) - 1
+    dims = coords.max(axis=0) + 2
+    if float(dims[0]) * float(dims[1]) * float(dims[2]) >= 2.0 ** 62:
+        raise ValueError(f"the bodies spread over {dims.tolist()} cells of {cell:g} m, too many to check for overlaps")
+    stride = np.array([dims[1] * dims[2], dims[2], 1], np.int64)
+    keys = coords @ stride
     order = np.argsort(keys, kind="stable")
     sorted_keys = keys[order]
+    positions = np.arange(n)
     firsts, seconds = [], []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dz in (-1, 0, 1):
-                nk = np.bitwise_xor.reduce((coords + np.array([dx, dy, dz])) * _HASH, axis=1)
-                lo = np.searchsorted(sorted_keys, nk, "left")
-                hi = np.searchsorted(sorted_keys, nk, "right")
-                counts = hi - lo
-                total = int(counts.sum())
-                if total == 0:
-                    continue
-                i = np.repeat(np.arange(n), counts)
-                step = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-                j = order[np.repeat(lo, counts) + step]
-                keep = i < j
-                firsts.append(i[keep])
-                seconds.append(j[keep])
-    if not firsts:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    pairs = np.unique(np.concatenate(firsts) * n + np.concatenate(seconds))  # hash collisions repeat pairs
-    i, j = np.divmod(pairs, n)
+    run_end = np.searchsorted(sorted_keys, sorted_keys, "right")
+    i, j = _expand(positions, positions + 1, run_end)  # same cell, later in the run
+    firsts.append(i)
+    seconds.append(j)
+    # the next cell in z, then 4 rows of 3 cells (dz = -1, 0, 1 are adjacent keys: one range each)
+    for delta, width in ((1, 0), (stride[1], 1), (stride[0] - stride[1], 1), (stride[0], 1),
+                         (stride[0] + stride[1], 1)):
+        lo = np.searchsorted(sorted_keys, sorted_keys + (delta - width), "left")
+        hi = np.searchsorted(sorted_keys, sorted_keys + (delta + width), "right")
+        i, j = _expand(positions, lo, hi)
+        firsts.append(i)
+        seconds.append(j)
+    i, j = order[np.concatenate(firsts)], order[np.concatenate(seconds)]
+    i, j = np.minimum(i, j), np.maximum(i, j)
     d = np.linalg.norm(pos[i] - pos[j], axis=1)
     near = d < bound[i] + bound[j] - TOLERANCE
     return i[near], j[near]
@@ -110,6 +127,12 @@ def _terrain_depths(terrain, shape, size, pos, rot) -> np.ndarray:
         if len(boxes):
             depth[boxes] = np.max(terrain.offset - corner_pts @ nrm, axis=1)
         return depth
+    # bodies whose lowest point is above the highest the surface can reach need no evaluation
+    top = terrain.offset[1] + terrain.max_height_deviation()
+    spheres = spheres[pos[spheres, 1] - size[spheres, 0] <= top]
+    if len(boxes):
+        low = corner_pts[:, :, 1].min(axis=1) <= top
+        boxes, corner_pts = boxes[low], corner_pts[low]
     r = size[spheres, 0]
     p = pos[spheres]
     depth[spheres] = r - (p[:, 1] - terrain.height(p[:, 0], p[:, 2]))
@@ -129,8 +152,10 @@ def find_overlaps(builder, limit: int = 5) -> dict:
     n = len(shape)
     if n == 0:
         return {}
-    q = c["orientation"] / np.linalg.norm(c["orientation"], axis=1, keepdims=True)
-    rot = quats_to_matrices(q)
+    rot = np.zeros((n, 3, 3))
+    box = np.flatnonzero(shape == SHAPE_BOX)  # spheres need no rotation
+    q = c["orientation"][box]
+    rot[box] = quats_to_matrices(q / np.linalg.norm(q, axis=1, keepdims=True))
     bound = np.where(shape == SHAPE_SPHERE, size[:, 0], np.linalg.norm(size, axis=1))
     i, j = _candidate_pairs(pos, bound)
     depth = np.full(len(i), -np.inf)
@@ -160,17 +185,21 @@ def find_overlaps(builder, limit: int = 5) -> dict:
             "pair_count": int(hit.sum()), "terrain_count": int(len(under))}
 
 
+def _length(d: float) -> str:
+    return f"{d:.3g} m" if d >= 1.0 else f"{d * 1000:.3g} mm"
+
+
 def describe_overlaps(found: dict, origin=lambda i: f"body {i}") -> str:
     """One line naming the bodies (``origin(i)`` says where body i came from)."""
     parts = []
     if found.get("pairs"):
         a, b, d = found["pairs"][0]
         more = found["pair_count"] - 1
-        parts.append(f"bodies {a} ({origin(a)}) and {b} ({origin(b)}) overlap by {d * 1000:.3g} mm at the start"
+        parts.append(f"bodies {a} ({origin(a)}) and {b} ({origin(b)}) overlap by {_length(d)} at the start"
                      + (f", and {more} more pairs overlap" if more else ""))
     if found.get("terrain"):
         a, d = found["terrain"][0]
         more = found["terrain_count"] - 1
-        parts.append(f"body {a} ({origin(a)}) starts {d * 1000:.3g} mm inside the terrain"
+        parts.append(f"body {a} ({origin(a)}) starts {_length(d)} inside the terrain"
                      + (f", and {more} more bodies do" if more else ""))
     return "; ".join(parts)

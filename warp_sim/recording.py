@@ -73,6 +73,8 @@ def check_output_path(path) -> Path:
     place that cannot be written (checked by creating and removing a probe file).
     """
     out = Path(path)
+    if out.is_dir():
+        raise ValueError(f"--out '{path}' is a directory; give a file name such as '{out / 'run.npz'}'")
     if out.suffix == "":
         out = out.with_name(out.name + ".npz")
     elif out.suffix != ".npz":

@@ -10,7 +10,8 @@ chunks (``sim.step(count)``), which checks for non-finite state once per chunk a
 NonFiniteStateError naming the first bad body and its step.
 
 With a ``writer`` (recording.RunWriter) the frames go to disk in chunks as the run goes and the
-file is finished whatever stops the run: completion, Ctrl-C (``stop_reason = "interrupted"``),
+file is finished whatever stops the run: completion, Ctrl-C (``stop_reason = "interrupted"``; the
+run stops at the end of the chunk it is in, recording that step, a second Ctrl-C at once),
 non-finite state (``"non_finite"``), contact overflow (``"contact_overflow"``) or another
 exception (``"error"``); the exception is then raised again.  Without one, the frames are
 returned as arrays (the in-memory API).
@@ -22,7 +23,9 @@ first step is left out: it compiles or loads the kernels (and captures the CUDA 
 from __future__ import annotations
 
 import math
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -66,6 +69,30 @@ class _MemorySink:
         return out
 
 
+class _DeferredInterrupt:
+    """Ctrl-C during a run stops it at the end of the current chunk, with the state whole and its
+    frame recorded; a second Ctrl-C interrupts at once.  Only in the main thread, and only when
+    SIGINT has Python's default handler (an application's own handler is left alone)."""
+
+    def __enter__(self):
+        self.requested = False
+        self._previous = None
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler):
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __exit__(self, *exc):
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
+
+
 def static_record(sim) -> dict:
     """Per-body and terrain arrays of a run: shape, size, terrain_*."""
     return {"shape": sim.model.host["body_shape"].astype(np.int32),
@@ -92,6 +119,13 @@ def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=No
     if checkpoint_every is not None and checkpoint_every < 1:
         raise ValueError(f"checkpoint_every must be an integer >= 1, got {checkpoint_every!r}")
     n = sim.model.body_count
+    if writer is None:  # every frame stays in memory: refuse what will not fit before stepping
+        from .limits import check_memory
+        from .recording import frame_bytes
+
+        frames = int(steps) // record_every + 2
+        check_memory(frames * frame_bytes(n), f"steps = {steps} with record_every = {record_every} "
+                     f"({frames:,} frames of {n:,} bodies kept in memory; stream them with a RunWriter)")
     sink = writer if writer is not None else _MemorySink(n)
     stats = {"frames": 0, "time": 0.0, "ke": 0.0, "pen": 0.0}
 
@@ -119,50 +153,56 @@ def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=No
     wall = 0.0
     done = start
     stop_reason, stop_detail = "completed", ""
-    try:
-        while done < end_step:
-            # chunk ends: frames, progress ticks, checkpoints, and the untimed warm-up step
-            end = min(end_step, _next_multiple(done, record_every), start + _next_multiple(done - start, tick))
-            if checkpoint_every:
-                end = min(end, _next_multiple(done, checkpoint_every))
-            timed = done > start
-            if not timed:
-                end = start + 1
-            if timed:
-                wp.synchronize_device(sim.device)
-                t0 = time.perf_counter()
-            sim.step(end - done)
-            if timed:
-                wp.synchronize_device(sim.device)
-                wall += time.perf_counter() - t0
-            bar.update(end - done)
-            done = end
-            if done % record_every == 0 or done == end_step:
-                record()
-            if checkpoint_every and on_checkpoint is not None and done % checkpoint_every == 0:
-                on_checkpoint(sim)
-    except BaseException as e:
-        from .contacts import ContactOverflowError
-        from .simulator import NonFiniteStateError
+    with _DeferredInterrupt() as interrupt:
+        try:
+            while done < end_step:
+                # chunk ends: frames, progress ticks, checkpoints, and the untimed warm-up step
+                end = min(end_step, _next_multiple(done, record_every), start + _next_multiple(done - start, tick))
+                if checkpoint_every:
+                    end = min(end, _next_multiple(done, checkpoint_every))
+                timed = done > start
+                if not timed:
+                    end = start + 1
+                if timed:
+                    wp.synchronize_device(sim.device)
+                    t0 = time.perf_counter()
+                sim.step(end - done)
+                if timed:
+                    wp.synchronize_device(sim.device)
+                    wall += time.perf_counter() - t0
+                bar.update(end - done)
+                done = end
+                recorded = done % record_every == 0 or done == end_step
+                if recorded:
+                    record()
+                if checkpoint_every and on_checkpoint is not None and done % checkpoint_every == 0:
+                    on_checkpoint(sim)
+                if interrupt.requested:
+                    if not recorded:
+                        record()  # the step the run stops at
+                    raise KeyboardInterrupt
+        except BaseException as e:
+            from .contacts import ContactOverflowError
+            from .simulator import NonFiniteStateError
 
-        done = sim.step_count
-        if isinstance(e, KeyboardInterrupt):
-            stop_reason = "interrupted"
-        elif isinstance(e, NonFiniteStateError):
-            stop_reason = "non_finite"
-        elif isinstance(e, ContactOverflowError):
-            stop_reason = "contact_overflow"
-        else:
-            stop_reason = "error"
-        stop_detail = str(e) or type(e).__name__
-        if writer is not None:
-            summary = summarize(done - start, max(done - start - 1, 0), wall, n, stats, start,
-                                stop_reason, stop_detail)
-            summary.update(summary_extra or {})
-            writer.finish(summary)
-        raise
-    finally:
-        bar.close()
+            done = sim.step_count
+            if isinstance(e, KeyboardInterrupt):
+                stop_reason = "interrupted"
+            elif isinstance(e, NonFiniteStateError):
+                stop_reason = "non_finite"
+            elif isinstance(e, ContactOverflowError):
+                stop_reason = "contact_overflow"
+            else:
+                stop_reason = "error"
+            stop_detail = str(e) or type(e).__name__
+            if writer is not None:
+                summary = summarize(done - start, max(done - start - 1, 0), wall, n, stats, start,
+                                    stop_reason, stop_detail)
+                summary.update(summary_extra or {})
+                writer.finish(summary)
+            raise
+        finally:
+            bar.close()
     if progress and not show_bar:
         print(f"{steps} steps ({sim.time:.4g} s simulated) in {time.perf_counter() - started:.2f} s",
               file=sys.stderr)

@@ -22,11 +22,13 @@ with the ``[sim] seed``, so a scene file always gives the same bodies.
 
 from __future__ import annotations
 
+import sys
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from .builder import Material, ModelBuilder
 from .simulator import SimConfig, Simulator
@@ -107,9 +109,12 @@ class Scene:
 
     def build(self, device=None) -> Simulator:
         """Upload the model to ``device`` (default: the scene's [sim] device) and make a Simulator."""
+        from .limits import check_scene_memory
+
         config = replace(self.config)
         if device is not None:
             config.device = str(device)
+        check_scene_memory(self)  # refuse before allocating what the machine does not have
         model = self.builder.finalize(config.device, self.checkpoints_per_edge)
         return Simulator(model, config)
 
@@ -170,15 +175,35 @@ def _parse(data: dict, source: str) -> Scene:
         scene.origins.append((start, scene.body_count, f"[[body]] #{i}"))
 
     rng = np.random.default_rng(config.seed)
-    for i, table in enumerate(_array_of_tables(data, "layout"), start=1):
-        start = scene.body_count
-        where = _add_layout(builder, table, i, rng)
-        scene.origins.append((start, scene.body_count, where))
+    layout_tables = _array_of_tables(data, "layout")
+    # a bar on a terminal, and only once building has taken a second (a million-body grid)
+    bar = tqdm(total=len(layout_tables) + 1, desc="building scene", unit="step", file=sys.stderr, delay=1.0,
+               disable=not sys.stderr.isatty(), leave=False)
+    with bar:
+        for i, table in enumerate(layout_tables, start=1):
+            start = scene.body_count
+            where = _add_layout(builder, table, i, rng)
+            scene.origins.append((start, scene.body_count, where))
+            bar.update(1)
+        bar.set_postfix_str("overlap check")
+        _finish_checks(scene, terrain, checkpoints_per_edge)
+        bar.update(1)
+    return scene
 
+
+def _finish_checks(scene: Scene, terrain, checkpoints_per_edge):
+    """What needs every body: at least one, a terrain float32 can evaluate there, no overlaps."""
+    from .limits import check_terrain_resolution
+
+    builder = scene.builder
     if scene.body_count == 0:
         raise SceneError("the scene has no bodies: add [[body]] or [[layout]] tables")
+    per_edge = checkpoints_per_edge or builder.default_checkpoints_per_edge()
+    try:  # the build warns about what the contacts cannot resolve; here only what cannot work
+        check_terrain_resolution(terrain, builder.columns(), per_edge, "[terrain]", warn=False)
+    except ValueError as e:
+        raise SceneError(str(e)) from None
     _check_overlaps(scene)
-    return scene
 
 
 def _check_overlaps(scene: Scene):

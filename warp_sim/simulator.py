@@ -117,6 +117,9 @@ class Simulator:
 
     def __init__(self, model: Model, config: SimConfig):
         config.validate()  # fields may have been set after construction
+        from .limits import check_simulator_memory
+
+        check_simulator_memory(model, config)  # before allocating contact buffers the machine lacks
         self.model = model
         self.config = config
         self.device = wp.get_device(config.device)

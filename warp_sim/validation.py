@@ -331,7 +331,11 @@ def check_array(spec, values, key: str, where: str = "", rows: bool = False) -> 
     ``rows``: ``values`` is (m, n) and ``spec`` a Vector checked row by row.
     """
     arr = np.asarray(values, dtype=np.float64)
-    good = spec.ok(arr)
+    if arr.ndim >= 1 and len(arr) > 1 and arr.strides[0] == 0:
+        probe = arr[:1]  # one value broadcast to every body: check it once
+    else:
+        probe = arr
+    good = spec.ok(probe)
     if not np.all(good):
         i = int(np.argmin(good))
         raise ValidationError(f"{where_key(where, f'{key}[{i}]')} must be {spec.describe()}, got {show(arr[i])}")

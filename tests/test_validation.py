@@ -1,0 +1,167 @@
+"""One set of rules for every entry point: the builder, SimConfig, the terrain classes and
+Simulator.step raise ValueError naming the field and the value, with the scene files' words."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from warp_sim import FourierTerrain, ModelBuilder, PlaneTerrain, SimConfig, Simulator
+from warp_sim.builder import Material
+from warp_sim.scene import SceneError, parse_scene
+
+API_ERRORS = {
+    "negative radius": (lambda: ModelBuilder().add_sphere(-1.0), "radius must be a positive finite number, got -1.0"),
+    "zero mass": (lambda: ModelBuilder().add_sphere(0.1, mass=0), "mass must be a positive finite number, got 0"),
+    "nan mass": (lambda: ModelBuilder().add_box((1, 1, 1), mass=float("nan")),
+                 "mass must be a positive finite number, got nan"),
+    "two half extents": (lambda: ModelBuilder().add_box([1, 1]),
+                         "half_extents must be 3 positive finite numbers, got [1, 1]"),
+    "zero quaternion": (lambda: ModelBuilder().add_sphere(0.1, orientation=(0, 0, 0, 0)),
+                        "orientation must be a non-zero vector of 4 finite numbers, got [0, 0, 0, 0]"),
+    "restitution": (lambda: ModelBuilder().add_sphere(0.1, restitution=2),
+                    "restitution must be a number in [0, 1], got 2"),
+    "position": (lambda: ModelBuilder().add_sphere(0.1, position=(0, 1e39, 0)),
+                 "position must be 3 finite numbers, got [0, 1e+39, 0]"),
+    "static": (lambda: ModelBuilder().add_sphere(0.1, static="yes"), "static must be true or false, got 'yes'"),
+    "negative dt": (lambda: SimConfig(dt=-1), "SimConfig dt must be a positive finite number, got -1"),
+    "zero substeps": (lambda: SimConfig(substeps=0), "SimConfig substeps must be an integer >= 1, got 0"),
+    "float substeps": (lambda: SimConfig(substeps=2.0), "SimConfig substeps must be an integer >= 1, got 2.0"),
+    "bogus integrator": (lambda: SimConfig(integrator="bogus"),
+                         "SimConfig integrator must be one of explicit_euler, semi_implicit, verlet, rk4, got 'bogus'"),
+    "gravity": (lambda: SimConfig(gravity=(0, -9.81)), "SimConfig gravity must be 3 finite numbers, got [0, -9.81]"),
+    "terms": (lambda: FourierTerrain(terms=100), "FourierTerrain terms must be an integer in [1, 32], got 100"),
+    "amplitude": (lambda: FourierTerrain(amplitude=-1),
+                  "FourierTerrain amplitude must be a finite number >= 0, got -1"),
+    "table shape": (lambda: FourierTerrain(terms=2, amplitudes=np.ones((3, 3))),
+                    "FourierTerrain amplitudes must be a terms x terms (2 x 2) array, got a 3 x 3 array"),
+    "plane normal": (lambda: PlaneTerrain(normal=(0, 0, 0)),
+                     "PlaneTerrain normal must be a non-zero vector of 3 finite numbers, got [0, 0, 0]"),
+    "material": (lambda: Material(friction=-1), "Material friction must be a finite number >= 0, got -1"),
+}
+
+
+@pytest.mark.parametrize("make, message", API_ERRORS.values(), ids=API_ERRORS.keys())
+def test_api_rejects_bad_values_with_one_line(make, message):
+    with pytest.raises(ValueError) as info:
+        make()
+    text = str(info.value)
+    assert message in text and "\n" not in text
+
+
+def test_scene_and_api_share_the_words():
+    """The same bad mass gives the same sentence from a scene file and from the builder."""
+    with pytest.raises(SceneError) as scene_error:
+        parse_scene({"body": [{"shape": "sphere", "radius": 0.1, "mass": 0}]}, "s.toml")
+    with pytest.raises(ValueError) as api_error:
+        ModelBuilder().add_sphere(0.1, mass=0)
+    assert str(scene_error.value) == f"s.toml: [[body]] #1 {api_error.value}"
+    with pytest.raises(SceneError) as scene_error:
+        parse_scene({"sim": {"dt": -1}, "body": [{"shape": "sphere", "radius": 0.1}]}, "s.toml")
+    with pytest.raises(ValueError) as api_error:
+        SimConfig(dt=-1)
+    assert str(scene_error.value).replace("s.toml: [sim]", "SimConfig") == str(api_error.value)
+
+
+def test_step_count_is_checked():
+    b = ModelBuilder()
+    b.add_sphere(0.1)
+    sim = Simulator(b.finalize("cpu"), SimConfig(sleep=False))
+    for bad, shown in ((-5, "-5"), (1.5, "1.5"), (True, "true")):
+        with pytest.raises(ValueError, match=f"Simulator.step count must be an integer >= 0, got {shown}"):
+            sim.step(bad)
+    sim.step(0)
+    assert sim.step_count == 0
+    with pytest.raises(ValueError, match="SimConfig substeps must be an integer >= 1, got 0"):
+        sim.update_settings(substeps=0)
+    assert sim.config.substeps == 4  # a refused change leaves the settings as they were
+
+
+def test_config_changed_after_construction_is_checked_by_the_simulator():
+    b = ModelBuilder()
+    b.add_sphere(0.1)
+    config = SimConfig()
+    config.solver = "nope"
+    with pytest.raises(ValueError, match="SimConfig solver must be one of soft_step, pushout, got 'nope'"):
+        Simulator(b.finalize("cpu"), config)
+
+
+def test_tiny_and_huge_bodies_are_refused_by_their_float32_inertia():
+    """A sphere of radius 1e-30 passes the per-key rules but its inertia is 0 in float32."""
+    with pytest.raises(ValueError, match=r"radius 1e-30 with mass 1 gives inertia .* not all finite non-zero float32"):
+        ModelBuilder().add_sphere(1e-30)
+    with pytest.raises(ValueError, match="half_extents"):
+        ModelBuilder().add_box((1e20, 1e20, 1e20), mass=1e30)
+    with pytest.raises(SceneError, match=r"^s.toml: \[\[body\]\] #1 radius 1e-30"):
+        parse_scene({"body": [{"shape": "sphere", "radius": 1e-30}]}, "s.toml")
+    ModelBuilder().add_sphere(1e-6, mass=1e-3)  # small but representable
+
+
+def test_the_sim_schema_and_simconfig_stay_in_step():
+    from warp_sim.validation import SIM_SCHEMA
+
+    assert set(SIM_SCHEMA) == {f.name for f in dataclasses.fields(SimConfig)}
+
+
+# ----------------------------------------------------------------------------------------------
+# add_bodies
+
+
+def _random_bodies(rng, n):
+    shapes = rng.integers(0, 2, n)
+    size = rng.uniform(0.05, 0.5, (n, 3))
+    size[shapes == 0, 1:] = 0.0
+    q = rng.normal(size=(n, 4))
+    return dict(shape=shapes, size=size, mass=rng.uniform(0.5, 3, n), position=rng.uniform(-10, 10, (n, 3)),
+                orientation=q, velocity=rng.normal(size=(n, 3)), angular_velocity=rng.normal(size=(n, 3)),
+                restitution=rng.uniform(0, 1, n), friction=rng.uniform(0, 1, n), static=rng.random(n) < 0.2)
+
+
+def test_bulk_add_equals_single_adds_bit_for_bit():
+    rng = np.random.default_rng(4)
+    n = 300
+    arrays = _random_bodies(rng, n)
+    bulk, single = ModelBuilder(), ModelBuilder()
+    single.add_sphere(0.3)  # mixing single and bulk adds keeps the order
+    bulk.add_sphere(0.3)
+    assert list(bulk.add_bodies(**arrays)) == list(range(1, n + 1))
+    for i in range(n):
+        common = {key: arrays[key][i] for key in ("mass", "position", "orientation", "velocity", "angular_velocity",
+                                                  "restitution", "friction", "static")}
+        if arrays["shape"][i] == 0:
+            single.add_sphere(arrays["size"][i, 0], **common)
+        else:
+            single.add_box(arrays["size"][i], **common)
+    a, b = bulk.host_arrays(3), single.host_arrays(3)
+    assert a.keys() == b.keys()
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    assert bulk.bodies[5].keys() == single.bodies[5].keys()
+
+
+def test_bulk_add_names_the_first_bad_entry():
+    b = ModelBuilder()
+    mass = np.ones(10)
+    mass[7] = 0.0
+    with pytest.raises(ValueError, match=r"^mass\[7\] must be a positive finite number, got 0.0$"):
+        b.add_bodies("sphere", 0.1, mass=mass)
+    pos = np.zeros((4, 3))
+    pos[2, 1] = np.nan
+    with pytest.raises(ValueError, match=r"position\[2\] must be 3 finite numbers, got \[0.0, nan, 0.0\]"):
+        b.add_bodies("box", (0.1, 0.2, 0.3), position=pos)
+    with pytest.raises(ValueError, match=r"shape\[1\] must be one of sphere, box, got 'cone'"):
+        b.add_bodies(np.array(["sphere", "cone"]), 0.1)
+    with pytest.raises(ValueError, match=r"orientation\[0\] must be a non-zero vector"):
+        b.add_bodies("sphere", 0.1, position=np.zeros((2, 3)), orientation=np.zeros((2, 4)))
+    assert b.body_count == 0  # nothing half-added
+
+
+def test_bodies_view_round_trips():
+    """builder.bodies gives one dict per body and can be assigned back (the demo does)."""
+    b = ModelBuilder()
+    b.add_bodies("sphere", np.array([0.1, 0.2, 0.3, 0.4]).reshape(4, 1), position=np.arange(12.0).reshape(4, 3))
+    copy = ModelBuilder()
+    copy.bodies = [dict(body, friction=0.9) for body in b.bodies]
+    assert copy.body_count == 4 and copy.bodies[-1]["size"][0] == 0.4
+    assert np.all(copy.columns()["friction"] == 0.9)
+    np.testing.assert_array_equal(copy.columns()["position"], b.columns()["position"])
