@@ -8,12 +8,14 @@ reference pose and the gap is grown by how far the two anchors have moved apart 
 An impulse P must act at one point for both bodies, or it adds a torque (x_i - x_j + r_i - r_j) x P
 to the pair and angular momentum is not kept in free space.  Applied at arms measured from the
 reference pose, r = p - x_ref, it acts at two points that have drifted apart by ``moved``: a
-glancing elastic hit of two spheres changed L by 5 %.  So each body's arm runs from its current
-centre to the midpoint of the two current anchors:
+glancing elastic hit of two spheres changed L by 5 %.  So the point moves with the mean of the
+two centres' displacements since, and each body's arm runs from its current centre to it:
 
-    r_i' = (I + D_i) r_i - moved / 2,   r_j' = (I + D_j) r_j + moved / 2,
+    r_i' = r_i - (dp_i - dp_j) / 2,   r_j' = r_j + (dp_i - dp_j) / 2,
 
-and r_i' + x_i = r_j' + x_j exactly: every pair impulse keeps linear and angular momentum.
+and x_i + r_i' = x_j + r_j' exactly: every pair impulse keeps linear and angular momentum.  (Arms
+turned with the bodies as well, (I + D) r - moved / 2, keep it too, but let a 10-box stack built
+top-down drift 12.9 mm sideways in 9 s instead of under 1 cm.)
 
 Two spheres need no stored geometry at all: their normal is the line of their current centres,
 n = (c_i - c_j) / |c_i - c_j|, the gap |c_i - c_j| - (R_i + R_j), and the arms -R_i n, +R_j n lie
@@ -62,11 +64,10 @@ def pair_point_now(
         return out
     ri = point - x_ref_i
     rj = point - x_ref_j
-    turned_i = ri + drift_r_i * ri
-    turned_j = rj + drift_r_j * rj
-    moved = (drift_p_i + turned_i - ri) - (drift_p_j + turned_j - rj)
+    moved = (drift_p_i + drift_r_i * ri) - (drift_p_j + drift_r_j * rj)
     out.normal = n_ref
     out.separation = -depth + wp.dot(moved, n_ref)
-    out.arm_i = turned_i - 0.5 * moved
-    out.arm_j = turned_j + 0.5 * moved
+    shift = 0.5 * (drift_p_i - drift_p_j)
+    out.arm_i = ri - shift
+    out.arm_j = rj + shift
     return out
