@@ -1,9 +1,13 @@
 """Body-body contact, found once per step or per substep (SimConfig.contact_update):
 broad phase -> narrow phase -> warm-start carry -> colouring.
 
-Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel; the
-only host read is the colour sizes the solver needs to size its launches (on CUDA the launches
-could use the capacity instead and stay graph-capturable).
+Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel.  With
+``capturable`` set (graph capture, and always on CUDA) nothing is read back: every launch is
+sized by the capacity and the solver's colour launches by per-colour upper bounds
+(coloring.PairColoring.launch_bounds), their threads past the live count returning at once.
+Direct CPU stepping reads the live pair count and the colour sizes back instead, which is
+cheap there and spares launches of idle threads; the CPU slab schedule (solvers/domains.py)
+reads its two slab counts back and so is never captured.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from ..launch import LIGHT_CHUNK, launch
-from ..solvers.coloring import COLOR_COUNT, color_pairs
+from ..solvers.coloring import COLOR_COUNT, PairColoring
 from ..solvers.domains import BINS, partition_domains
 from .broad_phase import make_broad_phase
 from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach
@@ -30,9 +34,8 @@ class PairContactPipeline:
         self.capacity = capacity
         self.broad = make_broad_phase(broad_phase, model.body_count, capacity, device)
         n = max(model.body_count, 1)
-        self.body_color_mask = wp.zeros(n, dtype=wp.int32, device=device)
-        self.pair_color = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
-        self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
+        self.coloring = PairColoring(model.body_count, capacity, device)
+        self.capturable = not wp.get_device(device).is_cpu
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
         self.colors = colors or domain_count == 0
@@ -68,8 +71,8 @@ class PairContactPipeline:
         launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
             m.body_bound_radius, m.body_inv_inertia, float(sweep_time),
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
-        self.broad.invalidate_radii()  # the grid cell follows the largest swept radius
-        self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin)
+        # the grid cell follows the largest swept radius, found on the device
+        self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin, radii_vary=True)
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
         launch(collide_pairs, self.capacity, key=self, inputs=[
@@ -82,11 +85,9 @@ class PairContactPipeline:
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
+        live = None if self.capturable else int(contacts.pair_count.numpy()[0])
         if self.colors:
-            wp.launch(color_pairs, dim=1, device=self.device, inputs=[
-                m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
-                self.body_color_mask, self.pair_color, self.color_cursor,
-                contacts.color_start, contacts.color_pairs_sorted])
+            self.coloring.run(m.body_inv_mass, contacts, live)
         if self.domain_count > 0:
             wp.launch(partition_domains, dim=1, device=self.device, inputs=[
                 self.domain_count, m.body_inv_mass, state.body_pos,
@@ -101,6 +102,8 @@ class PairContactPipeline:
             self.schedule.static_bodies = int(listed[-1] - listed[-2])
         if not self.colors:
             return [0] * (COLOR_COUNT + 1)  # not coloured: the slabs schedule every pair
+        if self.capturable:
+            return self.coloring.launch_bounds()
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
 
