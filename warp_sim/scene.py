@@ -352,6 +352,7 @@ SIM_SCHEMA = {
     "contact_max": Integer(ge=0),
     "contact_update": Choice(CONTACT_UPDATES),
     "pair_schedule": Choice(PAIR_SCHEDULES),
+    "graph": Boolean(),
 }
 
 TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")

@@ -158,7 +158,7 @@ class DomainSchedule:
 
 
 def default_pair_capacity(body_count: int) -> int:
-    """Room for every body to touch ~8 others (a sphere in a dense pile touches up to 12,
-    but each pair is shared by two bodies)."""
-    return int(8 * body_count + 64)
-
+    """Room for 12 candidate pairs a body: a lattice of touching cubes has 13 neighbours a body
+    within reach (6 faces, 12 edges, 8 corners, each pair shared by two), 10.5 a body for a
+    10x10x10 block.  Running out is not fatal: the Simulator redoes the step with more room."""
+    return int(12 * body_count + 64)

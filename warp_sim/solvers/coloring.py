@@ -22,11 +22,14 @@ colours on every run, device and CPU thread count.  The pairs are then radix-sor
 entry at the colour boundaries: no counter is shared.
 
 A pair left uncoloured after ROUND_CAP rounds, or whose bodies already use all COLOR_COUNT
-colours between them (more than COLOR_COUNT - 1 other pairs on its two bodies), goes to the
-overflow set, the last bucket, which is walked in order by one thread.  With 32 colours that
-takes a body with about 16 or more touching neighbours and a neighbour like it; a 10x10x10
-lattice of touching cubes (the densest case the tests build) leaves it empty.  ``overflow``
-counts those pairs on the device so a run can report them.
+colours between them, goes to the overflow set, the last bucket, walked in order by one thread
+(the last resort; ``overflow`` flags it on the device).  Measured on a 10x10x10 lattice of
+touching cubes (10,476 pairs, about 21 a body, the densest case the tests build): 93 rounds and
+32 colours, none left over; the greedy sequential walk this replaced needed more than its 24
+colours (5.6 % of the pairs went to its one-thread overflow).  A body takes at most one new
+colour a round (one local maximum per body), so the rounds grow with the pairs a body has;
+colouring from per-body adjacency lists (speculative colours, conflicts settled per body)
+would colour several at once and is the next step if the rounds cost too much on a GPU.
 
 Each launch is capacity-sized when the pipeline is captured (threads past the live pair count
 and rounds after the last busy one return at once); direct CPU stepping sizes them from the
@@ -39,8 +42,8 @@ from ..launch import LIGHT_CHUNK, launch
 
 wp.set_module_options({"enable_backward": False})
 
-COLOR_COUNT = 32  # colours in the int64 masks; the last bucket (index COLOR_COUNT) is the overflow set
-ROUND_CAP = 48  # Jones-Plassmann rounds; a 10x10x10 cube lattice needs about 12, a settled rain about 6
+COLOR_COUNT = 40  # colours in the int64 masks; the last bucket (index COLOR_COUNT) is the overflow set
+ROUND_CAP = 160  # Jones-Plassmann rounds (measured: see the module docstring)
 NO_POINTS = -1  # a candidate pair without contact points takes no colour
 UNCOLORED = -2
 SORT_BITS = 6  # keys are colours 0 .. COLOR_COUNT + 1 (the last: no points / past the live count)
