@@ -81,7 +81,7 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
     device = wp.get_device(device)
     if dim <= 0:
         return
-    if _checker is not None and device.is_cpu:
+    if _checker is not None and (device.is_cpu or _checker.any_device):
         _checker.launch(kernel, dim, [0, *inputs], device)
         return
     if device.is_cpu and device.is_capturing:

@@ -43,6 +43,8 @@ class RaceError(AssertionError):
 
 
 class RaceCheck:
+    any_device = False  # CPU launches only
+
     def __init__(self, chunks: int = 4, seed: int = 0, isolate: bool = True):
         self.chunks = chunks
         self.rng = np.random.default_rng(seed)
