@@ -74,13 +74,16 @@ def test_default_capacity_holds_a_10x10x10_lattice_of_touching_cubes_and_colours
     assert starts[COLOR_COUNT] > 0.99 * demand  # (pairs without points take no colour)
 
 
-def test_pair_overflow_grows_the_buffers_and_redoes_the_step(monkeypatch):
+@pytest.mark.parametrize("graph", [False, True])
+def test_pair_overflow_grows_the_buffers_and_redoes_the_step(monkeypatch, graph):
+    """Direct stepping grows within the step; a captured call is rerun from its saved start."""
     reference = lattice(3)
     monkeypatch.setattr(simulator, "default_pair_capacity", lambda n: 16)
-    small = lattice(3)
+    small = lattice(3, graph=graph)
     assert small.pairs.capacity == 16
     with pytest.warns(RuntimeWarning, match=r"grown to \d+ pairs") as record:
-        small.step(3)
+        small.step(1)
+        small.step(2)
     assert len(record) == 1
     reference.step(3)
     assert small.pairs.capacity >= int(small.contacts.pair_demand.numpy()[0]) > 16

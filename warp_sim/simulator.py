@@ -24,11 +24,13 @@ The first step runs directly (it loads the modules and makes the scratch buffers
 created on first use); settings changes and capacity growth capture again.  The CPU slab
 schedule reads its slab counts back, so a graph on the CPU uses the colour schedule.
 
-Capacity: a step whose broad phase found more candidate pairs than the buffer holds sets a
-device flag; ``step`` reads it once per call, and on overflow restores the state saved at the
-call's start, grows the buffers (reported once per growth, as a warning) and runs the steps
-again, so no step ever runs with truncated contacts.  An explicit ``contact_max`` is a hard
-limit instead: the state is restored and ContactOverflowError raised.
+Capacity: no step runs with truncated contacts.  Direct CPU stepping reads the broad phase's
+demand right after it runs and, on overflow, grows the buffers and collides again before
+anything was written.  Captured steps (and CUDA) read nothing inside the step: the broad phase's
+demand sets a device flag, ``step`` reads it once per call, and on overflow restores the state
+saved at the call's start, grows the buffers and runs the steps again (re-capturing the graph).
+Each growth is reported once, as a RuntimeWarning.  An explicit ``contact_max`` is a hard limit
+instead: ContactOverflowError (a captured call restores its starting state first).
 """
 
 from __future__ import annotations
@@ -44,7 +46,6 @@ import warp as wp
 from .collide import collide_terrain
 from .collide.broad_phase import BROAD_PHASES
 from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
-from .contacts import ContactOverflowError
 from .sleep import AwakeModel, Sleep
 from .launch import cpu_threads, launch
 from .model import Model
@@ -166,7 +167,7 @@ class Simulator:
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
-        self._saved = None
+        self._saved = None  # the state at the start of a step() call, when its steps are captured
         self._warm = False
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
         self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
@@ -262,9 +263,7 @@ class Simulator:
         # the speculative windows cover the whole step: terrain slots open while the gap is
         # closable within dt, pairs are found with bounds swept over dt
         self._stage("terrain", self.collide, self.states[0], self.contacts, dt, margin)
-        color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts, margin, dt)
-        self._color_sizes = color_sizes
-        self._note_overflow()
+        color_sizes = self._stage("pairs", self._collide_pairs, margin, dt)
         for k in range(self.config.substeps):
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule())
@@ -285,10 +284,7 @@ class Simulator:
             color_sizes = None
             domains = None
             if self.pairs is not None:
-                color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts,
-                                          self.config.speculative_margin, h)
-                self._color_sizes = color_sizes
-                self._note_overflow()
+                color_sizes = self._stage("pairs", self._collide_pairs, self.config.speculative_margin, h)
                 domains = self.pairs.domain_schedule()
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, True, domains)
@@ -297,16 +293,32 @@ class Simulator:
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._keep_output_buffer()
 
-    def _note_overflow(self):
-        wp.launch(note_pair_overflow, dim=1, device=self.device,
-                  inputs=[self.contacts.pair_demand, self.pairs.capacity, self.pair_overflow])
+    def _collide_pairs(self, margin: float, sweep_time: float):
+        """The pair pipeline on states[0]; grows the buffers first if they would overflow (direct
+        stepping checks on the host right after the broad phase; a captured step raises the
+        device flag that ``step`` reads)."""
+
+        def grow(demand: int):
+            if self.config.contact_max:
+                self.contacts.pair_demand.assign(np.array([demand], dtype=np.int64))
+                self.contacts.check_overflow()
+            self._grow(demand)
+            return self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, grow)
+
+        sizes = self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, grow)
+        if self.pairs.capturable:
+            wp.launch(note_pair_overflow, dim=1, device=self.device,
+                      inputs=[self.contacts.pair_demand, self.pairs.capacity, self.pair_overflow])
+        self._color_sizes = sizes
+        return sizes
 
     def step(self, count: int = 1, check: bool = True):
         """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body.
 
-        The pair-overflow flag is read once per call: on overflow the ``count`` steps are run
-        again from the state saved at the start, with grown buffers (module docstring)."""
-        if self.pairs is None:
+        Captured steps raise a device flag on pair overflow, read once per call: the ``count``
+        steps are then run again from the state saved at the start, with grown buffers (module
+        docstring).  Direct stepping grows the buffers within the step instead."""
+        if self.pairs is None or not self.pairs.capturable:
             self._run_steps(count)
         else:
             self._save()
@@ -319,9 +331,8 @@ class Simulator:
                 if self.config.contact_max:
                     self.contacts.pair_demand.assign(np.array([demand], dtype=np.int64))
                     self.contacts.check_overflow()
-                    raise ContactOverflowError(f"contact buffer overflow: {demand} pairs, contact_max="
-                                               f"{self.config.contact_max}")
                 self._grow(demand)
+                self._restore_saved(start)
                 self.pair_overflow.zero_()
                 self._run_steps(count)
                 demand = int(self.pair_overflow.numpy()[0])
@@ -355,16 +366,15 @@ class Simulator:
         self.step_count = step_count
 
     def _grow(self, demand: int):
-        """Rebuild the pair buffers with room for 1.5x the demand; the persistent contact data
-        (terrain slots, last step's pairs for warm starting) moves over with the saved state."""
+        """Rebuild the pair pipeline with room for 1.5x the demand; the contact buffer keeps its
+        terrain slots and last pass's pairs (the warm-start source)."""
         old = self.pairs.capacity
         capacity = max(2 * old, int(1.5 * demand) + 64)
         warnings.warn(f"body-body candidate pairs ({demand}) exceeded the pair buffer ({old}); grown to "
-                      f"{capacity} pairs and the step redone", RuntimeWarning, stacklevel=3)
+                      f"{capacity} pairs and the step redone", RuntimeWarning, stacklevel=4)
         self._make_pairs(capacity)
-        self.contacts = self.model.contacts(capacity)
+        self.contacts.grow_pairs(capacity)
         self._probe = self.model.contacts(capacity)
-        self._restore_saved(self.step_count)
         self.invalidate_graph()
 
     def invalidate_graph(self):

@@ -60,8 +60,12 @@ class PairContactPipeline:
                                            self.domain_pair, self.body_domain, self.body_on_boundary,
                                            self.boundary_body_count, self.boundary_body)
 
-    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0) -> list[int]:
+    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, on_overflow=None) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
+
+        ``on_overflow(demand)``: when not capturable, called once the broad phase has found more
+        candidates than the buffer holds, before anything is written to ``contacts``; its result
+        is returned instead (the Simulator grows the buffers and collides again).
 
         ``sweep_time`` is the time until the next collision pass: each body's bounding sphere
         grows by how far it can move in it (narrow_phase.swept_reach), so a pair found once
@@ -73,6 +77,10 @@ class PairContactPipeline:
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
         # the grid cell follows the largest swept radius, found on the device
         self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin, radii_vary=True)
+        if on_overflow is not None and not self.capturable:
+            demand = int(self.broad.pair_demand.numpy()[0])
+            if demand > self.capacity:
+                return on_overflow(demand)
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
         launch(collide_pairs, self.capacity, key=self, inputs=[
