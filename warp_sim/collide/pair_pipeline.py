@@ -36,6 +36,7 @@ class PairContactPipeline:
         n = max(model.body_count, 1)
         self.coloring = PairColoring(model.body_count, capacity, device)
         self.capturable = not wp.get_device(device).is_cpu
+        self.live_dim = self.capacity  # threads of the pair launches (the live count when not capturable)
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
         self.colors = colors or domain_count == 0
@@ -77,25 +78,27 @@ class PairContactPipeline:
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
         # the grid cell follows the largest swept radius, found on the device
         self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin, radii_vary=True)
-        if on_overflow is not None and not self.capturable:
+        # direct stepping: threads for the pairs found only (capturable: for the capacity)
+        self.live_dim = self.capacity
+        if not self.capturable:
             demand = int(self.broad.pair_demand.numpy()[0])
-            if demand > self.capacity:
+            if demand > self.capacity and on_overflow is not None:
                 return on_overflow(demand)
+            self.live_dim = max(1, min(demand, self.capacity))
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
-        launch(collide_pairs, self.capacity, key=self, inputs=[
+        launch(collide_pairs, self.live_dim, key=self, inputs=[
             m.body_shape, m.body_size, m.body_bound_radius, margin, state.body_pos, state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
             contacts.pair_depth, contacts.pair_feature], device=self.device)
-        launch(carry_pair_impulses, self.capacity, key=self, inputs=[
+        launch(carry_pair_impulses, self.live_dim, key=self, inputs=[
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
-        live = None if self.capturable else int(contacts.pair_count.numpy()[0])
         if self.colors:
-            self.coloring.run(m.body_inv_mass, contacts, live)
+            self.coloring.run(m.body_inv_mass, contacts, None if self.capturable else self.live_dim)
         if self.domain_count > 0:
             wp.launch(partition_domains, dim=1, device=self.device, inputs=[
                 self.domain_count, m.body_inv_mass, state.body_pos,
@@ -138,7 +141,7 @@ class PairContactPipeline:
 
     def store(self, contacts):
         """Keep this substep's pairs and impulses as the next substep's warm-start source."""
-        launch(store_pairs, self.capacity, key=self, inputs=[
+        launch(store_pairs, self.live_dim, key=self, inputs=[
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse,
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
