@@ -91,9 +91,14 @@ class ByteCounter:
 
 
 def count_step(sim) -> dict[str, dict]:
-    """Per-kernel launches and bytes of one step of ``sim`` (run it a little first)."""
-    with ByteCounter(sim) as counter:
-        sim.step(check=False)
+    """Per-kernel launches and bytes of one step of ``sim`` (run it a little first); the step
+    runs directly (not replayed from a graph) so that every launch passes through launch.py."""
+    graph, sim.use_graph = sim.use_graph, False
+    try:
+        with ByteCounter(sim) as counter:
+            sim.step(check=False)
+    finally:
+        sim.use_graph = graph
     return dict(counter.kernels)
 
 

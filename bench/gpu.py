@@ -159,11 +159,14 @@ def sim_bytes(sim) -> int:
 
 
 def kernel_times(sim, steps: int) -> dict[str, float]:
-    """Milliseconds a step per kernel (CUDA kernel timing) or per stage (CPU)."""
+    """Milliseconds a step per kernel (CUDA kernel timing, of direct launches: a graph replay is
+    not timed per kernel) or per stage (CPU)."""
     if sim.device.is_cuda:
+        graph, sim.use_graph = sim.use_graph, False
         wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
         sim.step(steps, check=False)
         results = wp.timing_end()
+        sim.use_graph = graph
         out: dict[str, float] = {}
         for r in results:
             name = r.name.split("(")[0].removeprefix("forward kernel ")
