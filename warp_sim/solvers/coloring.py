@@ -5,18 +5,20 @@ body's velocity).  Pairs of one colour share no dynamic body, so a colour is one
 launch; colours run one after another, which keeps the sweep Gauss-Seidel.  Static (and
 sleeping) bodies take no colour: any number of pairs may touch the ground at once.
 
-The colouring is Jones-Plassmann with first-fit colours, in parallel rounds of two launches:
+The colouring is Jones-Plassmann with first-fit colours, in parallel rounds of three launches:
 
 * claim: every uncoloured pair writes its priority into both of its dynamic bodies with an
-  atomic max (the maximum does not depend on the order of the writers);
-* pick: a pair that holds the maximum at each of its dynamic bodies is a local maximum among
-  the uncoloured pairs around it, so no other pair touching its bodies is picked in this
-  round; it takes the lowest colour neither body uses yet (a bit mask per body) and writes
-  those two masks alone.
+  atomic max and an atomic min (neither result depends on the order of the writers);
+* pick the maxima: a pair that holds the maximum at each of its dynamic bodies is a local
+  maximum among the uncoloured pairs around it, so no other pair touching its bodies is picked
+  with it; it takes the lowest colour neither body uses yet (a bit mask per body) and writes
+  those two masks alone;
+* pick the minima the same way, in a launch of their own, so that they see the colours the
+  maxima just took (a body may gain two colours a round, which halves the rounds).
 
 Priorities are a hash of the pair (i, j) (the pair index breaks hash ties, so no two pairs are
-equal), and the round number sits in the high bits, so a body's maximum from an earlier round
-never needs clearing.  The result depends only on the pair list, not on thread order: the same
+equal), and the round number sits in the high bits (rising for the max, falling for the min),
+so a body's extremes from an earlier round never need clearing.  The result depends only on the pair list, not on thread order: the same
 colours on every run, device and CPU thread count.  The pairs are then radix-sorted by colour
 (stable, so in pair order within a colour) and the colour starts found by one thread per sorted
 entry at the colour boundaries: no counter is shared.
@@ -24,10 +26,10 @@ entry at the colour boundaries: no counter is shared.
 A pair left uncoloured after ROUND_CAP rounds, or whose bodies already use all COLOR_COUNT
 colours between them, goes to the overflow set, the last bucket, walked in order by one thread
 (the last resort; ``overflow`` flags it on the device).  Measured on a 10x10x10 lattice of
-touching cubes (10,476 pairs, about 21 a body, the densest case the tests build): 93 rounds and
-32 colours, none left over; the greedy sequential walk this replaced needed more than its 24
-colours (5.6 % of the pairs went to its one-thread overflow).  A body takes at most one new
-colour a round (one local maximum per body), so the rounds grow with the pairs a body has;
+touching cubes (10,476 pairs, about 21 a body, the densest case the tests build): 44 rounds and
+33 colours, none left over (93 rounds with the maxima alone); the greedy sequential walk this
+replaced needed more than its 24 colours (5.6 % of the pairs went to its one-thread overflow).
+A body gains at most two colours a round, so the rounds grow with the pairs a body has;
 colouring from per-body adjacency lists (speculative colours, conflicts settled per body)
 would colour several at once and is the next step if the rounds cost too much on a GPU.
 
@@ -43,21 +45,34 @@ from ..launch import LIGHT_CHUNK, launch
 wp.set_module_options({"enable_backward": False})
 
 COLOR_COUNT = 40  # colours in the int64 masks; the last bucket (index COLOR_COUNT) is the overflow set
-ROUND_CAP = 160  # Jones-Plassmann rounds (measured: see the module docstring)
+ROUND_CAP = 96  # Jones-Plassmann rounds; a 10x10x10 lattice of touching cubes needs 44
 NO_POINTS = -1  # a candidate pair without contact points takes no colour
 UNCOLORED = -2
+LEAST_EMPTY = 0x7FFFFFFFFFFFFFFF  # no pair at the body this round (atomic min)
 SORT_BITS = 6  # keys are colours 0 .. COLOR_COUNT + 1 (the last: no points / past the live count)
 
 
 @wp.func
-def pair_priority(i: int, j: int, p: int, round: int) -> wp.int64:
+def pair_hash(i: int, j: int, p: int) -> wp.int64:
     h = wp.uint32(i) * wp.uint32(0x9E3779B1) ^ (wp.uint32(j) * wp.uint32(0x85EBCA77) + wp.uint32(0x165667B1))
     h = h ^ (h >> wp.uint32(15))
     h = h * wp.uint32(0x2C1B3C6D)
     h = h ^ (h >> wp.uint32(12))
     h = h * wp.uint32(0x297A2D39)
     h = h ^ (h >> wp.uint32(15))
-    return (wp.int64(round) << wp.int64(56)) | (wp.int64(h & wp.uint32(0xFFFFFF)) << wp.int64(32)) | wp.int64(p)
+    return (wp.int64(h & wp.uint32(0xFFFF)) << wp.int64(32)) | wp.int64(p)
+
+
+@wp.func
+def pair_priority(i: int, j: int, p: int, round: int) -> wp.int64:
+    """Key of the atomic max: later rounds above earlier ones, so no clearing between rounds."""
+    return (wp.int64(round) << wp.int64(48)) | pair_hash(i, j, p)
+
+
+@wp.func
+def pair_priority_low(i: int, j: int, p: int, round: int) -> wp.int64:
+    """Key of the atomic min: later rounds below earlier ones."""
+    return (wp.int64(ROUND_CAP - round) << wp.int64(48)) | pair_hash(i, j, p)
 
 
 @wp.kernel
@@ -87,18 +102,20 @@ def color_claim(
     pair_body: wp.array(dtype=wp.vec2i),
     pair_color: wp.array(dtype=wp.int32),
     pending: wp.array(dtype=wp.int32),
-    # atomic max, order-independent
+    # atomic max and min, order-independent
     body_best: wp.array(dtype=wp.int64),
+    body_least: wp.array(dtype=wp.int64),
 ):
     p = wp.tid()
     if pending[round] == 0 or p >= pair_count[0] or pair_color[p] != UNCOLORED:
         return
     ij = pair_body[p]
     key = pair_priority(ij[0], ij[1], p, round)
-    if body_inv_mass[ij[0]] > 0.0:
-        wp.atomic_max(body_best, ij[0], key)
-    if body_inv_mass[ij[1]] > 0.0:
-        wp.atomic_max(body_best, ij[1], key)
+    low = pair_priority_low(ij[0], ij[1], p, round)
+    for e in range(2):
+        if body_inv_mass[ij[e]] > 0.0:
+            wp.atomic_max(body_best, ij[e], key)
+            wp.atomic_min(body_least, ij[e], low)
 
 
 @wp.kernel
@@ -106,10 +123,12 @@ def color_pick(
     tid_offset: int,
     round: int,
     last_round: int,
+    phase: int,
     body_inv_mass: wp.array(dtype=float),
     pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
     body_best: wp.array(dtype=wp.int64),
+    body_least: wp.array(dtype=wp.int64),
     # in/out: a body's mask is written only by the one pair that holds its maximum this round
     body_color_mask: wp.array(dtype=wp.int64),
     pair_color: wp.array(dtype=wp.int32),
@@ -124,14 +143,20 @@ def color_pick(
     i = ij[0]
     j = ij[1]
     key = pair_priority(i, j, p, round)
+    low = pair_priority_low(i, j, p, round)
     dyn_i = body_inv_mass[i] > 0.0
     dyn_j = body_inv_mass[j] > 0.0
-    if (dyn_i and body_best[i] != key) or (dyn_j and body_best[j] != key):
-        if round == last_round:
-            pair_color[p] = COLOR_COUNT
-            overflow[0] = 1
-        else:
-            pending[round + 1] = 1
+    is_max = (not dyn_i or body_best[i] == key) and (not dyn_j or body_best[j] == key)
+    is_min = (not dyn_i or body_least[i] == low) and (not dyn_j or body_least[j] == low)
+    if phase == 0 and not is_max:
+        if not is_min:
+            if round == last_round:
+                pair_color[p] = COLOR_COUNT
+                overflow[0] = 1
+            else:
+                pending[round + 1] = 1
+        return
+    if phase == 1 and not is_min:
         return
     used = wp.int64(0)
     if dyn_i:
@@ -215,6 +240,10 @@ def color_range(color: int, color_start: wp.array(dtype=wp.int32), t: int) -> wp
     return wp.vec2i(first, wp.min(last, end))
 
 
+class _Site:
+    pass
+
+
 class PairColoring:
     """Scratch and launches of the colouring; ``run`` writes ``contacts.color_start`` and
     ``contacts.color_pairs_sorted``."""
@@ -225,6 +254,7 @@ class PairColoring:
         n = max(body_count, 1)
         self.body_count = body_count
         self.body_best = wp.full(n, -1, dtype=wp.int64, device=device)
+        self.body_least = wp.full(n, LEAST_EMPTY, dtype=wp.int64, device=device)
         self.body_color_mask = wp.zeros(n, dtype=wp.int64, device=device)
         self.pair_color = wp.zeros(self.capacity, dtype=wp.int32, device=device)
         self.pending = wp.zeros(ROUND_CAP + 1, dtype=wp.int32, device=device)
@@ -232,6 +262,7 @@ class PairColoring:
         self.sort_key = wp.zeros(2 * self.capacity, dtype=wp.int32, device=device)
         self.sort_pair = wp.zeros(2 * self.capacity, dtype=wp.int32, device=device)
         self.rounds_used = 0  # rounds of the last direct (non-captured) pass
+        self._pick_site = (_Site(), _Site())  # recorded launches per phase (launch.py)
 
     def run(self, body_inv_mass, contacts, live_count: int | None = None):
         """``live_count``: the pair count read on the host (direct stepping), or None to size
@@ -241,6 +272,7 @@ class PairColoring:
         self.pending.zero_()
         self.overflow.zero_()
         self.body_best.fill_(-1)
+        self.body_least.fill_(LEAST_EMPTY)
         self.body_color_mask.zero_()
         if dim > 0:
             launch(color_init, dim, key=self, min_chunk=LIGHT_CHUNK, device=dev, inputs=[
@@ -249,10 +281,12 @@ class PairColoring:
                 # atomics: one plain launch (Warp's CPU atomics are not atomic across launch chunks)
                 wp.launch(color_claim, dim=dim, device=dev, inputs=[
                     r, body_inv_mass, contacts.pair_count, contacts.pair_body, self.pair_color, self.pending,
-                    self.body_best])
-                launch(color_pick, dim, key=self, device=dev, inputs=[
-                    r, ROUND_CAP - 1, body_inv_mass, contacts.pair_count, contacts.pair_body, self.body_best,
-                    self.body_color_mask, self.pair_color, self.pending, self.overflow])
+                    self.body_best, self.body_least])
+                for phase in range(2):
+                    launch(color_pick, dim, key=self._pick_site[phase], device=dev, inputs=[
+                        r, ROUND_CAP - 1, phase, body_inv_mass, contacts.pair_count, contacts.pair_body,
+                        self.body_best, self.body_least, self.body_color_mask, self.pair_color, self.pending,
+                        self.overflow])
                 if live_count is not None and int(self.pending.numpy()[r + 1]) == 0:
                     self.rounds_used = r + 1
                     break
