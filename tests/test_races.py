@@ -21,12 +21,15 @@ def pile(**config) -> Simulator:
     return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=2, sleep_time=0.05, **config))
 
 
-@pytest.mark.parametrize("schedule", ["colors", "domains"])
-def test_pair_contact_steps_have_no_races(schedule):
+@pytest.mark.parametrize("schedule,capturable", [("colors", False), ("colors", True), ("domains", False)])
+def test_pair_contact_steps_have_no_races(schedule, capturable):
+    """``capturable``: launches sized by capacities and bounds, as a captured step sizes them."""
     sim = pile(pair_schedule=schedule)
+    sim.pairs.capturable = capturable
     sim.step()  # loads the modules outside the check
     with RaceCheck() as check:
         sim.step(3)
+    assert check.isolated.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
     for kernel in ("collide_terrain", "collide_pairs", "carry_pair_impulses", "color_pick", "color_bounds",
                    "store_pairs", "update_sleep", "gather_neighbour_timers"):
         assert check.checked.get(kernel, 0) > 0, kernel

@@ -50,6 +50,7 @@ class RaceCheck:
         self.rng = np.random.default_rng(seed)
         self.isolate = isolate
         self.checked: dict[str, int] = {}  # kernel name -> launches checked
+        self.isolated: dict[str, int] = {}  # kernel name -> launches of more than one thread
 
     def __enter__(self):
         launch_module.set_checker(self)
@@ -92,6 +93,7 @@ class RaceCheck:
                                         f"(dim {dim}, {chunks} chunks)")
         if self.isolate and dim > 1:
             self._isolate(name, params, shared, dim, views, before, normal, run, reset)
+            self.isolated[name] = self.isolated.get(name, 0) + 1
         reset(normal)
         self.checked[name] = self.checked.get(name, 0) + 1
 
