@@ -5,6 +5,8 @@
 Parts, each appended to OUT/gpu.json, OUT/gpu.csv (one row per measurement) and OUT/gpu.png as
 soon as it finishes (a run cut short keeps what it measured):
 
+0. compile: every kernel module loaded for the device on parallel threads (Warp compiles modules
+   one at a time on first use; a cold cache would otherwise cost minutes of the run);
 1. environment: Warp, device, memory, driver;
 2. capture: a mixed rain stepped with ``graph`` off and on;
 3. spheres on the terrain (terrain contact only, dt 1/240, 1 substep), 1M;
@@ -110,6 +112,25 @@ def _qm(q):
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
         np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
+
+
+def kernel_modules() -> list[str]:
+    root = Path(__file__).resolve().parents[1]
+    return [".".join(p.relative_to(root).with_suffix("").parts)
+            for p in sorted((root / "warp_sim").rglob("*.py")) if "@wp.kernel" in p.read_text()]
+
+
+def precompile(device: str) -> dict:
+    """Import every kernel module and load them for ``device`` on parallel threads."""
+    import importlib
+    import os
+
+    names = kernel_modules()
+    for name in names:
+        importlib.import_module(name)
+    start = time.perf_counter()
+    wp.load_module("warp_sim", device=device, recursive=True, max_workers=os.cpu_count() or 1)
+    return {"modules": names, "load_seconds": round(time.perf_counter() - start, 1)}
 
 
 def rain(count, shape, device, body_contact, **config) -> Simulator:
@@ -253,13 +274,14 @@ def main(argv=None) -> int:
     size = QUICK if args.quick else FULL
     steps = size["steps"]
     report = Report(args.out, args.budget)
+    report.part("compile", lambda: precompile(args.device))
     per_body_s = {"mixed": 3e-6, "spheres": 1e-6}  # host build + upload per body, updated as parts run
 
     def environment():
         info = machine_info(args.device)
         if device.is_cuda:
             info.update(total_memory_gb=round(device.total_memory / 2**30, 1), arch=device.arch,
-                        driver=wp.context.runtime.driver_version)
+                        driver=wp.get_cuda_driver_version())
         return info
 
     report.part("environment", environment)

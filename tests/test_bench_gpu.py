@@ -22,7 +22,7 @@ def test_quick_run_writes_every_part(tmp_path):
     assert gpu.main(["--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "gpu.json").read_text())
     parts = result["parts"]
-    for name in ("environment", "capture", "spheres_terrain", "mixed_500", "mixed_2000", "determinism", "memory",
+    for name in ("compile", "environment", "capture", "spheres_terrain", "mixed_500", "mixed_2000", "determinism", "memory",
                  "cpu_vs_device", "newton"):
         assert parts[name]["status"] == "ok", (name, parts[name])
     assert parts["determinism"]["identical"]
