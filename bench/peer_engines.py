@@ -467,7 +467,7 @@ class PyBulletEngine(Engine):
 class NewtonEngine(Engine):
     name = "newton"
 
-    def __init__(self, spec, hfield_spacing, hfield_margin):
+    def __init__(self, spec, hfield_spacing, hfield_margin, device="cpu"):
         super().__init__(spec, hfield_spacing, hfield_margin)
         import newton
 
@@ -504,7 +504,7 @@ class NewtonEngine(Engine):
             else:
                 density = float(s.mass[i] / (2.0 * r) ** 3)
                 b.add_shape_box(body=body, hx=r, hy=r, hz=r, cfg=material(i, density=density, collision_group=group))
-        self.model = b.finalize(device="cpu")
+        self.model = b.finalize(device=device)
         self.solver = newton.solvers.SolverXPBD(self.model, enable_restitution=s.restitution > 0)
         self.pipeline = newton.CollisionPipeline(self.model)
         self.contacts = self.pipeline.contacts()

@@ -9,7 +9,8 @@ Two parts, because the two kinds of contact have different shapes:
 * Body-body contacts follow the broad phase's sorted candidate pairs: pair p owns point slots
   4p .. 4p+3 (a manifold has at most 4 points), so the narrow phase writes without any shared
   counter (Warp's CPU atomics are not safe across the chunks of ``warp_sim.launch``).  The
-  buffer holds ``pair_max`` pairs; more candidates than that is a ``ContactOverflowError``
+  buffer holds ``pair_max`` pairs; the Simulator grows it when more candidates are found
+  (``grow_pairs``), or, with an explicit ``contact_max``, stops with a ``ContactOverflowError``
   naming the capacity and the demand.  Last substep's pairs, features and impulses are kept in
   ``prev_*`` arrays so new points inherit the impulses of the same features (warm starting).
 
@@ -65,6 +66,12 @@ class Contacts:
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
         self.terrain_contact_count = wp.zeros(max(body_count, 1), dtype=wp.int32, device=device)
+        self.device = device
+        self._alloc_pairs(pair_max)
+
+    def _alloc_pairs(self, pair_max: int):
+        device = self.device
+        self.pair_max = pair_max
         m = max(pair_max, 1)
         k = m * POINTS_PER_PAIR
         self.pair_count = wp.zeros(1, dtype=wp.int32, device=device)
@@ -87,6 +94,16 @@ class Contacts:
         # color_pairs_sorted[color_start[c]:color_start[c + 1]]; the last colour is the overflow set
         self.color_start = wp.zeros(COLOR_COUNT + 2, dtype=wp.int32, device=device)
         self.color_pairs_sorted = wp.zeros(m, dtype=wp.int32, device=device)
+
+    def grow_pairs(self, pair_max: int):
+        """Room for ``pair_max`` pairs; last pass's pairs (the warm-start source) move over."""
+        keep = [self.prev_pair_count, self.prev_pair_body, self.prev_pair_point_count, self.prev_pair_feature,
+                self.prev_pair_normal_impulse, self.prev_pair_tangent_impulse]
+        self._alloc_pairs(pair_max)
+        for dst, src in zip([self.prev_pair_count, self.prev_pair_body, self.prev_pair_point_count,
+                             self.prev_pair_feature, self.prev_pair_normal_impulse, self.prev_pair_tangent_impulse],
+                            keep):
+            wp.copy(dst, src, count=min(dst.size, src.size))
 
     def count(self) -> int:
         terrain = int(np.count_nonzero(self.terrain_contact_active.numpy()[: self.slot_count]))

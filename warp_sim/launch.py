@@ -11,7 +11,10 @@ per thread).  Kernels launched this way must not count through shared atomics: W
 count / scan / write instead (see collide/broad_phase.py); the one shared write left is the
 non-finite flag, which any racing writer still leaves non-zero.
 
-On CUDA it is a single ordinary launch (and so graph-capturable).
+On CUDA it is a single ordinary launch (and so graph-capturable).  During a CPU graph capture
+(Warp records the launches for replay, ``wp.ScopedCapture(device="cpu")``) it is one launch too,
+recorded in order on the calling thread.  ``race_check.RaceCheck`` replaces every launch made
+through here with checked ones (chunk orders shuffled and reversed, each thread run alone).
 ``WARP_SIM_CPU_THREADS`` overrides the thread count (default: all cores).
 
 Packing 20-30 kernel arguments costs ~30 us per ``wp.launch`` in Python, more than a small
@@ -38,6 +41,12 @@ _CPU_COUNT = os.cpu_count() or 1  # asked once: the call costs ~9 us, and launch
 _pool: ThreadPoolExecutor | None = None
 _warm: set = set()
 _recorded: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # owner -> {(kernel, device): _Recorded}
+_checker = None  # a race_check.RaceCheck while one is active
+
+
+def set_checker(checker) -> None:
+    global _checker
+    _checker = checker
 
 
 class _Recorded:
@@ -71,6 +80,12 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
     threads each carry a large share of the work, such as solvers/domains.py's slabs)."""
     device = wp.get_device(device)
     if dim <= 0:
+        return
+    if _checker is not None and (device.is_cpu or _checker.any_device):
+        _checker.launch(kernel, dim, [0, *inputs], device)
+        return
+    if device.is_cpu and device.is_capturing:
+        wp.launch(kernel, dim=dim, inputs=[0, *inputs], device=device)
         return
     threads = cpu_threads() if device.is_cpu else 1
     chunks = min(threads, dim // min_chunk)

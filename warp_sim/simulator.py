@@ -14,15 +14,30 @@ substep either way (its collision pass is a few terrain evaluations per body).  
 sleeping on, the sleep timers are updated (sleep.py).
 
 The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
-has body-body contact (``body_contact``), so a scene pays for what it uses.  On CUDA a step
-without body-body contact is captured once as a graph and replayed; with it, the colour sizes
-are read back each substep, so the launches are issued directly.
+has body-body contact (``body_contact``), so a scene pays for what it uses.
+
+``graph`` (default: on CUDA) captures the whole step, terrain, pairs, colours, substeps,
+restitution and sleeping, as one graph and replays it (on the CPU with Warp's CPU capture, which
+tests use to prove the CUDA contract).  Nothing inside a captured step is read back: launches
+are sized by capacities and bounds and their idle threads return at once (collide/pair_pipeline.py).
+The first step runs directly (it loads the modules and makes the scratch buffers that are
+created on first use); settings changes and capacity growth capture again.  The CPU slab
+schedule reads its slab counts back, so a graph on the CPU uses the colour schedule.
+
+Capacity: no step runs with truncated contacts.  Direct CPU stepping reads the broad phase's
+demand right after it runs and, on overflow, grows the buffers and collides again before
+anything was written.  Captured steps (and CUDA) read nothing inside the step: the broad phase's
+demand sets a device flag, ``step`` reads it once per call, and on overflow restores the state
+saved at the call's start, grows the buffers and runs the steps again (re-capturing the graph).
+Each growth is reported once, as a RuntimeWarning.  An explicit ``contact_max`` is a hard limit
+instead: ContactOverflowError (a captured call restores its starting state first).
 """
 
 from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,6 +92,7 @@ class SimConfig:
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
     allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
+    graph: bool | None = None  # capture the whole step as one graph and replay it; None: on CUDA only
 
     def __post_init__(self):
         self.validate()
@@ -107,6 +123,13 @@ def advance_step_counter(sim_step: wp.array(dtype=wp.int32)):
     sim_step[0] = sim_step[0] + 1
 
 
+@wp.kernel
+def note_pair_overflow(pair_demand: wp.array(dtype=wp.int64), capacity: int, overflow: wp.array(dtype=wp.int64)):
+    """overflow[0] = the largest demand of the steps since it was cleared, once it exceeded capacity."""
+    if pair_demand[0] > wp.int64(capacity):
+        overflow[0] = wp.max(overflow[0], pair_demand[0])
+
+
 class Simulator:
     # Skip box checkpoints that provably cannot reach the Fourier surface (collide/terrain_contact.py).
     # It changes no result; tests turn it off to check exactly that.
@@ -123,6 +146,13 @@ class Simulator:
         self.model = model
         self.config = config
         self.device = wp.get_device(config.device)
+        self.use_graph = self.device.is_cuda if config.graph is None else bool(config.graph)
+        if self.use_graph and config.pair_schedule == "domains":
+            raise ValueError("pair_schedule 'domains' reads its slab counts back and cannot be captured; "
+                             "set graph = false or pair_schedule = 'colors', got graph = true")
+        if self.use_graph and config.broad_phase == "grid_hash" and config.body_contact:
+            raise ValueError("broad_phase 'grid_hash' sizes wp.HashGrid on the host and cannot be captured; "
+                             "set graph = false or another broad phase, got graph = true")
         self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
         dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
@@ -137,11 +167,12 @@ class Simulator:
         capacity = 0
         if config.body_contact and model.body_count >= 2 and dynamic >= 1:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
-            # with the slab schedule only push-out still walks colours
-            self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device,
-                                             self._domain_count(config), colors=config.solver == "pushout")
+            self._make_pairs(capacity)
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
+        self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
+        self._saved = None  # the state at the start of a step() call, when its steps are captured
+        self._warm = False
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
         self.bad_count = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.step_count = 0
@@ -149,6 +180,14 @@ class Simulator:
         self.graph = None
         self.profile = False  # when set, step() records per-stage wall time in stage_times [s]
         self.stage_times: dict[str, float] = {}
+
+    def _make_pairs(self, capacity: int):
+        config = self.config
+        # with the slab schedule only push-out still walks colours
+        self.pairs = PairContactPipeline(self.physics_model, config.broad_phase, capacity, self.device,
+                                         self._domain_count(config),
+                                         colors=config.solver == "pushout")
+        self.pairs.capturable = self.use_graph or self.device.is_cuda
 
     @property
     def state(self):
@@ -209,7 +248,7 @@ class Simulator:
         schedule = config.pair_schedule
         if schedule == "domains" and not self.device.is_cpu:
             raise ValueError(f"pair_schedule 'domains' runs on the CPU only, got device {config.device!r}")
-        if config.solver != "soft_step" or schedule == "colors" or not self.device.is_cpu:
+        if config.solver != "soft_step" or schedule == "colors" or not self.device.is_cpu or self.use_graph:
             return 0
         return cpu_threads()
 
@@ -258,8 +297,7 @@ class Simulator:
         def collide():
             self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin)
             if self.pairs is not None:
-                self._color_sizes = self._stage("pairs", self.pairs.collide, self.states[0], self.contacts, margin,
-                                                sweep_time, self._gravity_magnitude)
+                self._stage("pairs", self._collide_pairs, margin, sweep_time)
 
         collide()
         if self.sleep is not None and self.pairs is not None:
@@ -284,11 +322,57 @@ class Simulator:
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._keep_output_buffer()
 
+    def _collide_pairs(self, margin: float, sweep_time: float):
+        """The pair pipeline on states[0]; grows the buffers first if they would overflow (direct
+        stepping checks on the host right after the broad phase; a captured step raises the
+        device flag that ``step`` reads)."""
+
+        def grow(demand: int):
+            if self.config.contact_max:
+                self.contacts.pair_demand.assign(np.array([demand], dtype=np.int64))
+                self.contacts.check_overflow()
+            self._grow(demand)
+            return self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, self._gravity_magnitude,
+                                      on_overflow=grow)
+
+        sizes = self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, self._gravity_magnitude,
+                                   on_overflow=grow)
+        if self.pairs.capturable:
+            wp.launch(note_pair_overflow, dim=1, device=self.device,
+                      inputs=[self.contacts.pair_demand, self.pairs.capacity, self.pair_overflow])
+        self._color_sizes = sizes
+        return sizes
+
     def step(self, count: int = 1, check: bool = True):
-        """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body."""
-        count = check_value(STEP_COUNT, count, "count", "Simulator.step")
+        """Advance ``count`` steps of dt; raises NonFiniteStateError naming the first bad body.
+
+        Captured steps raise a device flag on pair overflow, read once per call: the ``count``
+        steps are then run again from the state saved at the start, with grown buffers (module
+        docstring).  Direct stepping grows the buffers within the step instead."""
+        if self.pairs is None or not self.pairs.capturable:
+            self._run_steps(count)
+        else:
+            self._save()
+            self.pair_overflow.zero_()
+            start = self.step_count
+            self._run_steps(count)
+            demand = int(self.pair_overflow.numpy()[0])
+            while demand > 0:
+                self._restore_saved(start)
+                if self.config.contact_max:
+                    self.contacts.pair_demand.assign(np.array([demand], dtype=np.int64))
+                    self.contacts.check_overflow()
+                self._grow(demand)
+                self._restore_saved(start)
+                self.pair_overflow.zero_()
+                self._run_steps(count)
+                demand = int(self.pair_overflow.numpy()[0])
+        if check:
+            self.check_finite()
+
+    def _run_steps(self, count: int):
         for _ in range(count):
-            if self.device.is_cuda and self.pairs is None and not self.profile:
+            if self.use_graph and not self.profile and self._warm:
                 if self.graph is None:
                     with wp.ScopedCapture(device=self.device) as capture:
                         self._simulate_one_step()
@@ -296,10 +380,33 @@ class Simulator:
                 wp.capture_launch(self.graph)
             else:
                 self._simulate_one_step()
+                self._warm = True
             self.step_count += 1
-        if check:
-            self.check_finite()
-            self.contacts.check_overflow()
+
+    def _save(self):
+        arrays = self._persistent_arrays()
+        if self._saved is None or len(self._saved) != len(arrays) or any(
+                a.shape != b.shape for a, b in zip(arrays, self._saved)):
+            self._saved = [wp.empty_like(a) for a in arrays]
+        for dst, src in zip(self._saved, arrays):
+            wp.copy(dst, src)
+
+    def _restore_saved(self, step_count: int):
+        for dst, src in zip(self._persistent_arrays(), self._saved):
+            wp.copy(dst, src, count=min(dst.size, src.size))
+        self.step_count = step_count
+
+    def _grow(self, demand: int):
+        """Rebuild the pair pipeline with room for 1.5x the demand; the contact buffer keeps its
+        terrain slots and last pass's pairs (the warm-start source)."""
+        old = self.pairs.capacity
+        capacity = max(2 * old, int(1.5 * demand) + 64)
+        warnings.warn(f"body-body candidate pairs ({demand}) exceeded the pair buffer ({old}); grown to "
+                      f"{capacity} pairs and the step redone", RuntimeWarning, stacklevel=4)
+        self._make_pairs(capacity)
+        self.contacts.grow_pairs(capacity)
+        self._probe = self.model.contacts(capacity)
+        self.invalidate_graph()
 
     def invalidate_graph(self):
         """Call after changing model or settings: the captured graph baked the old values in."""
@@ -349,7 +456,7 @@ class Simulator:
 
     def restore(self, snap: dict):
         for dst, src in zip(self._persistent_arrays(), snap["arrays"]):
-            wp.copy(dst, src)
+            wp.copy(dst, src, count=min(dst.size, src.size))
         self.step_count = snap["step_count"]
 
     def set_terrain(self, terrain):

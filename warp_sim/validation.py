@@ -381,6 +381,7 @@ SIM_SCHEMA = {
     "contact_update": Choice(CONTACT_UPDATES),
     "pair_schedule": Choice(PAIR_SCHEDULES),
     "allow_initial_overlap": Boolean(),
+    "graph": Boolean(),
 }
 
 TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")

@@ -34,9 +34,11 @@ sort their (short) rows in place.  This also keeps the result exact when the CPU
 split over threads: Warp's CPU ``atomic_add`` is a plain read-modify-write, so a shared atomic
 counter would lose increments between concurrent chunks.
 
-Radii are static in the model, so nothing per-step depends on them except through the cell
-width, which comes from the largest radius and is cached per radii array
-(``invalidate_radii`` after editing radii in place).  Only positions change per step.
+The grids' cell width comes from the largest radius, reduced on the device (an atomic max,
+whose result does not depend on the order of the writers) whenever the radii array changes or
+the caller says its radii vary (the pair pipeline's swept radii); nothing is read back, so the
+sorted grid and the O(N^2) methods can be captured in a graph.  ``grid_hash`` still needs the
+width and its bounds on the host (wp.HashGrid's dimensions and build radius are host values).
 """
 
 from __future__ import annotations
@@ -193,6 +195,28 @@ def finish_pair_count(
     pair_count[0] = wp.int32(wp.min(demand, wp.int64(capacity)))
 
 
+@wp.kernel
+def radius_max(
+    # In
+    radii: wp.array(dtype=float),
+    # Out: atomic max, one plain launch (Warp's CPU atomics are not atomic across launch chunks)
+    max_radius: wp.array(dtype=float),
+):
+    wp.atomic_max(max_radius, 0, radii[wp.tid()])
+
+
+@wp.kernel
+def grid_scale(
+    # In
+    margin: float,
+    max_radius: wp.array(dtype=float),
+    # Out
+    inv_cell: wp.array(dtype=wp.float64),
+):
+    width = (wp.float64(2.0) * wp.float64(max_radius[0]) + wp.float64(margin)) * wp.float64(1.0 + CELL_SLACK)
+    inv_cell[0] = wp.float64(1.0) / (width + wp.float64(1.0e-12))
+
+
 # all_pairs --------------------------------------------------------------------------------------
 
 
@@ -311,6 +335,10 @@ class BroadPhase:
         self.row_start = wp.zeros(n, dtype=wp.int64, device=self.device)
         self._radius_key = None
         self._max_radius = 0.0
+        self._device_radius_key = None
+        self._radii_vary = False
+        self.max_radius_device = wp.zeros(1, dtype=float, device=self.device)
+        self.inv_cell = wp.zeros(1, dtype=wp.float64, device=self.device)
 
     # per-step entry points
 
@@ -324,10 +352,11 @@ class BroadPhase:
             self.check_overflow(demand)
         return demand
 
-    def run(self, positions: wp.array, radii: wp.array, inv_mass: wp.array | None = None, margin: float = 0.0):
-        """Launch the broad phase.  Reads nothing back, except the largest radius once per radii
-        array and, for grid_hash, the cell bounds; grid_sorted and the O(N^2) methods can be
-        captured in a CUDA graph once the radius is cached."""
+    def run(self, positions: wp.array, radii: wp.array, inv_mass: wp.array | None = None, margin: float = 0.0,
+            radii_vary: bool = False):
+        """Launch the broad phase.  Reads nothing back except, for grid_hash, the largest radius
+        and the cell bounds; the others can be captured in a graph.  ``radii_vary``: the radii
+        change between calls (the largest is then reduced again every call)."""
         n = positions.shape[0]
         if n > self.body_count:
             raise ValueError(f"broad phase '{self.name}' was sized for {self.body_count} bodies, got {n}")
@@ -344,6 +373,7 @@ class BroadPhase:
         else:
             launch(mark_static, dim=n, inputs=[inv_mass, self.body_static], device=self.device,
                    min_chunk=LIGHT_CHUNK)
+        self._radii_vary = radii_vary
         self._find_rows(n, positions, radii, float(margin))
         wp.launch(finish_pair_count, dim=1, device=self.device,
                   inputs=[n, self.row_count, self.row_start, self.capacity, self.pair_demand, self.pair_count])
@@ -373,6 +403,17 @@ class BroadPhase:
     def invalidate_radii(self):
         """Call after changing radii in place, so the grid cell width is recomputed."""
         self._radius_key = None
+        self._device_radius_key = None
+
+    def device_inv_cell(self, radii: wp.array, n: int, margin: float, radii_vary: bool) -> wp.array:
+        """1 / cell width as a float64[1] device array (the host formula of cell_width)."""
+        key = (radii.ptr, n)
+        if radii_vary or key != self._device_radius_key:
+            self.max_radius_device.zero_()
+            wp.launch(radius_max, dim=n, device=self.device, inputs=[radii[:n], self.max_radius_device])
+            self._device_radius_key = key
+        wp.launch(grid_scale, dim=1, device=self.device, inputs=[margin, self.max_radius_device, self.inv_cell])
+        return self.inv_cell
 
     def cell_width(self, radii: wp.array, margin: float) -> float:
         return (2.0 * self.max_radius(radii) + margin) * (1.0 + CELL_SLACK) + 1.0e-12

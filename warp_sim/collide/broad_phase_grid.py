@@ -34,12 +34,12 @@ def grid_cells(
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     # In
-    inv_cell: wp.float64,
+    inv_cell: wp.array(dtype=wp.float64),
     # Out
     body_cell: wp.array(dtype=wp.vec3i),
 ):
     i = wp.tid() + tid_offset
-    body_cell[i] = cell_of(body_pos[i], inv_cell)
+    body_cell[i] = cell_of(body_pos[i], inv_cell[0])
 
 
 @wp.kernel
@@ -437,7 +437,7 @@ class SortedGridBroadPhase(GridBroadPhase):
             *grid, self.row_stash, self.row_count, self.row_start, self.capacity, self.pair_body])
 
     def _find_rows(self, n, positions, radii, margin):
-        self._cells(n, positions, 1.0 / self.cell_width(radii, margin))
+        self._cells(n, positions, self.device_inv_cell(radii, n, margin, self._radii_vary))
         wp.launch(grid_table_layout, dim=1, device=self.device,
                   inputs=[self.table_bits, self.cell_bounds, self.table_layout])
         launch(grid_bucket_keys, dim=n, device=self.device, min_chunk=LIGHT_CHUNK,
@@ -477,8 +477,11 @@ class HashGridBroadPhase(GridBroadPhase):
         ])
 
     def _find_rows(self, n, positions, radii, margin):
+        if self._radii_vary:
+            self.invalidate_radii()
         width = self.cell_width(radii, margin)
-        self._cells(n, positions, 1.0 / width)
+        self.inv_cell.fill_(1.0 / width)
+        self._cells(n, positions, self.inv_cell)
         dims = tuple(1 << b for b in table_layout_host(self.cell_bounds.numpy(), self.table_bits))
         if dims != self.grid_dims:
             self.grid = wp.HashGrid(*dims, device=self.device)

@@ -1,9 +1,13 @@
 """Body-body contact, found once per step or per substep (SimConfig.contact_update):
 broad phase -> narrow phase -> warm-start carry -> colouring.
 
-Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel; the
-only host read is the colour sizes the solver needs to size its launches (on CUDA the launches
-could use the capacity instead and stay graph-capturable).
+Owned by the Simulator when the scene has body-body contact.  Every stage is a kernel.  With
+``capturable`` set (graph capture, and always on CUDA) nothing is read back: every launch is
+sized by the capacity and the solver's colour launches by per-colour upper bounds
+(coloring.PairColoring.launch_bounds), their threads past the live count returning at once.
+Direct CPU stepping reads the live pair count and the colour sizes back instead, which is
+cheap there and spares launches of idle threads; the CPU slab schedule (solvers/domains.py)
+reads its two slab counts back and so is never captured.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from ..launch import LIGHT_CHUNK, launch
-from ..solvers.coloring import COLOR_COUNT, color_pairs
+from ..solvers.coloring import COLOR_COUNT, PairColoring
 from ..solvers.domains import BINS, partition_domains
 from .broad_phase import make_broad_phase
 from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach
@@ -30,9 +34,9 @@ class PairContactPipeline:
         self.capacity = capacity
         self.broad = make_broad_phase(broad_phase, model.body_count, capacity, device)
         n = max(model.body_count, 1)
-        self.body_color_mask = wp.zeros(n, dtype=wp.int32, device=device)
-        self.pair_color = wp.zeros(max(capacity, 1), dtype=wp.int32, device=device)
-        self.color_cursor = wp.zeros(COLOR_COUNT + 1, dtype=wp.int32, device=device)
+        self.coloring = PairColoring(model.body_count, capacity, device)
+        self.capturable = not wp.get_device(device).is_cpu
+        self.live_dim = self.capacity  # threads of the pair launches (the live count when not capturable)
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
         self.colors = colors or domain_count == 0
@@ -57,8 +61,13 @@ class PairContactPipeline:
                                            self.domain_pair, self.body_domain, self.body_on_boundary,
                                            self.boundary_body_count, self.boundary_body)
 
-    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, gravity: float = 0.0) -> list[int]:
+    def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, gravity: float = 0.0,
+                on_overflow=None) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
+
+        ``on_overflow(demand)``: when not capturable, called once the broad phase has found more
+        candidates than the buffer holds, before anything is written to ``contacts``; its result
+        is returned instead (the Simulator grows the buffers and collides again).
 
         ``sweep_time`` is the time until the next collision pass: each body's bounding sphere
         grows by how far it can move in it (narrow_phase.swept_reach; ``gravity`` is |g|), so a
@@ -68,25 +77,29 @@ class PairContactPipeline:
         launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
             m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, float(sweep_time), float(gravity),
             state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
-        self.broad.invalidate_radii()  # the grid cell follows the largest swept radius
-        self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin)
+        # the grid cell follows the largest swept radius, found on the device
+        self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin, radii_vary=True)
+        # direct stepping: threads for the pairs found only (capturable: for the capacity)
+        self.live_dim = self.capacity
+        if not self.capturable:
+            demand = int(self.broad.pair_demand.numpy()[0])
+            if demand > self.capacity and on_overflow is not None:
+                return on_overflow(demand)
+            self.live_dim = max(1, min(demand, self.capacity))
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
-        launch(collide_pairs, self.capacity, key=self, inputs=[
+        launch(collide_pairs, self.live_dim, key=self, inputs=[
             m.body_shape, m.body_size, m.body_bound_radius, margin, state.body_pos, state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
             contacts.pair_depth, contacts.pair_feature], device=self.device)
-        launch(carry_pair_impulses, self.capacity, key=self, inputs=[
+        launch(carry_pair_impulses, self.live_dim, key=self, inputs=[
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
         if self.colors:
-            wp.launch(color_pairs, dim=1, device=self.device, inputs=[
-                m.body_inv_mass, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
-                self.body_color_mask, self.pair_color, self.color_cursor,
-                contacts.color_start, contacts.color_pairs_sorted])
+            self.coloring.run(m.body_inv_mass, contacts, None if self.capturable else self.live_dim)
         if self.domain_count > 0:
             wp.launch(partition_domains, dim=1, device=self.device, inputs=[
                 self.domain_count, m.body_inv_mass, state.body_pos,
@@ -101,6 +114,8 @@ class PairContactPipeline:
             self.schedule.static_bodies = int(listed[-1] - listed[-2])
         if not self.colors:
             return [0] * (COLOR_COUNT + 1)  # not coloured: the slabs schedule every pair
+        if self.capturable:
+            return self.coloring.launch_bounds()
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
 
@@ -127,7 +142,7 @@ class PairContactPipeline:
 
     def store(self, contacts):
         """Keep this substep's pairs and impulses as the next substep's warm-start source."""
-        launch(store_pairs, self.capacity, key=self, inputs=[
+        launch(store_pairs, self.live_dim, key=self, inputs=[
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
             contacts.pair_normal_impulse, contacts.pair_tangent_impulse,
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
@@ -155,7 +170,7 @@ class DomainSchedule:
 
 
 def default_pair_capacity(body_count: int) -> int:
-    """Room for every body to touch ~8 others (a sphere in a dense pile touches up to 12,
-    but each pair is shared by two bodies)."""
-    return int(8 * body_count + 64)
-
+    """Room for 12 candidate pairs a body: a lattice of touching cubes has 13 neighbours a body
+    within reach (6 faces, 12 edges, 8 corners, each pair shared by two), 10.5 a body for a
+    10x10x10 block.  Running out is not fatal: the Simulator redoes the step with more room."""
+    return int(12 * body_count + 64)

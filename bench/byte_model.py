@@ -1,0 +1,142 @@
+"""Byte model: bytes read and written per body-step, per kernel, counted from one real step.
+
+Every launch made through ``warp_sim.launch`` during one step is recorded with its dimension
+and its array arguments.  The model charges each launch, for each array argument, the elements
+its live threads own, read and written once:
+
+    bytes = sum over arrays  itemsize x min(length, live x per_thread)
+
+Per-body launches: ``live`` is the dimension and ``per_thread`` = ceil(length / dim) (1 for a
+per-body array, a body's slots for the terrain slot arrays).  Per-pair launches (the narrow
+phase, warm-start carry and store, the colouring, and the colour launches of the solver and of
+sleeping): ``live`` is the pairs found (for a colour launch, the pairs of that colour), a pair
+owns ceil(length / capacity) elements of a pair array (4 points) and 2 of a per-body array.
+Threads past the live count read one counter and are not charged.
+What it leaves out: launches made with ``wp.launch`` directly (one-thread bookkeeping, the
+atomic colouring claims, the radix sorts and scans), neighbour reads in the broad phase beyond
+one element a thread, and caches: it is a model of the traffic a GPU has to move at least once,
+the floor that ``bench/gpu.py`` divides by the measured time.
+
+    python bench/byte_model.py [--count 2000] [--device cpu]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import warp as wp  # noqa: E402
+
+from warp_sim import FourierTerrain, cases  # noqa: E402
+from warp_sim import launch as launch_module  # noqa: E402
+
+
+PAIR_KERNELS = {"collide_pairs", "carry_pair_impulses", "store_pairs", "color_init", "color_pick", "color_keys",
+                "color_bounds", "pair_pass", "pushout_pair", "gather_neighbour_timers"}
+
+
+class ByteCounter:
+    """A launch.py checker that runs each launch unchanged and records its arguments."""
+
+    any_device = True
+
+    def __init__(self, sim):
+        self.body_count = sim.model.body_count
+        self.pair_live = 0
+        self.capacity = 1
+        if sim.pairs is not None:
+            self.capacity = sim.pairs.capacity
+        self.kernels: dict[str, dict] = defaultdict(lambda: {"launches": 0, "bytes": 0})
+
+    def launch(self, kernel, dim, inputs, device):
+        wp.launch(kernel, dim=dim, inputs=inputs, device=device)
+        name = kernel.key
+        params = [arg.label for arg in kernel.adj.args]
+        args = dict(zip(params, inputs))
+        total = 0
+        if name in PAIR_KERNELS:
+            live = dim
+            for counter in ("pair_count", "broad_pair_count"):
+                if counter in args:
+                    live = int(args[counter].numpy()[0])
+            if "color" in args and "color_start" in args:
+                starts = args["color_start"].numpy()
+                live = int(starts[args["color"] + 1] - starts[args["color"]])
+            live = min(live, dim)
+            for value in inputs:
+                if isinstance(value, wp.array) and value.size > 0:
+                    per_pair = 2 if value.size == max(self.body_count, 1) else math.ceil(value.size / self.capacity)
+                    total += wp.types.type_size_in_bytes(value.dtype) * min(value.size, live * per_pair)
+        else:
+            for value in inputs:
+                if isinstance(value, wp.array) and value.size > 0:
+                    per_thread = math.ceil(value.size / dim)
+                    total += wp.types.type_size_in_bytes(value.dtype) * min(value.size, dim * per_thread)
+        entry = self.kernels[name]
+        entry["launches"] += 1
+        entry["bytes"] += total
+
+    def __enter__(self):
+        launch_module.set_checker(self)
+        return self
+
+    def __exit__(self, *exc):
+        launch_module.set_checker(None)
+        return False
+
+
+def count_step(sim) -> dict[str, dict]:
+    """Per-kernel launches and bytes of one step of ``sim`` (run it a little first); the step
+    runs directly (not replayed from a graph) so that every launch passes through launch.py."""
+    graph, sim.use_graph = sim.use_graph, False
+    try:
+        with ByteCounter(sim) as counter:
+            sim.step(check=False)
+    finally:
+        sim.use_graph = graph
+    return dict(counter.kernels)
+
+
+def per_body_step(sim) -> dict[str, float]:
+    """Bytes per body-step per kernel, plus 'total'."""
+    kernels = count_step(sim)
+    n = sim.model.body_count
+    out = {name: k["bytes"] / n for name, k in sorted(kernels.items(), key=lambda kv: -kv[1]["bytes"])}
+    out["total"] = sum(k["bytes"] for k in kernels.values()) / n
+    return out
+
+
+def scenes(count: int, device: str = "cpu"):
+    """The two scenes of the issue's paper model: spheres on the terrain (terrain contact only),
+    mixed bodies with body contact; both run for 90 steps (1.5 s: landed and piled)."""
+    terrain = FourierTerrain(amplitude=0.5)
+    spheres = cases.terrain_drop(count, "sphere", terrain=terrain, device=device, sleep=False)
+    mixed = cases.terrain_drop(count, "mix", terrain=terrain, spacing=0.9, body_contact=True, device=device,
+                               sleep=False, pair_schedule="colors")  # the GPU schedule
+    for sim in (spheres, mixed):
+        sim.step(90)
+    return {"spheres_terrain": spheres, "mixed_body_contact": mixed}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--count", type=int, default=2000)
+    p.add_argument("--device", default="cpu")
+    args = p.parse_args(argv)
+    wp.config.log_level = wp.LOG_WARNING
+    for name, sim in scenes(args.count, args.device).items():
+        model = per_body_step(sim)
+        print(f"{name}: {model['total']:.0f} bytes per body-step")
+        for kernel, b in model.items():
+            if kernel != "total":
+                print(f"  {kernel:32s} {b:10.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
