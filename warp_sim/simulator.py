@@ -349,6 +349,7 @@ class Simulator:
         Captured steps raise a device flag on pair overflow, read once per call: the ``count``
         steps are then run again from the state saved at the start, with grown buffers (module
         docstring).  Direct stepping grows the buffers within the step instead."""
+        count = check_value(STEP_COUNT, count, "count", "Simulator.step")
         if self.pairs is None or not self.pairs.capturable:
             self._run_steps(count)
         else:

@@ -21,7 +21,8 @@ where the saving comes from.  Its velocity is zeroed when it falls asleep.
   other sleeping neighbours act as static for that step and wake through the timers at its end.
 
 Neighbour timers come from the last substep's contact pairs, one thread per pair, the minimum
-taken with atomics (the same result whatever the order).
+taken with atomics (the same result whatever the order; on the CPU these launches run whole on
+one thread, as Warp's CPU atomics are not atomic across threads).
 """
 
 from __future__ import annotations
@@ -182,9 +183,11 @@ class Sleep:
         if contacts.pair_max == 0:
             return
         self.woken.zero_()
-        launch(mark_touched_sleepers, contacts.pair_max, key=self, inputs=[
-            contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass, self.sleep_time,
-            self.body_inv_mass_awake, self.body_sleep_timer, self.body_wake, self.woken], device=self.device)
+        # atomics: one launch, never split into CPU chunks (launch.py: Warp's CPU atomics are plain
+        # read-modify-writes, so chunks on two threads would race)
+        wp.launch(mark_touched_sleepers, dim=contacts.pair_max, device=self.device, inputs=[
+            0, contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass, self.sleep_time,
+            self.body_inv_mass_awake, self.body_sleep_timer, self.body_wake, self.woken])
         launch(wake_marked, m.body_count, key=self, inputs=[
             m.body_inv_mass, self.body_wake, self.body_sleep_timer, self.body_inv_mass_awake], device=self.device)
         wp.capture_if(self.woken, on_true=recollide)
@@ -193,9 +196,9 @@ class Sleep:
         """After a step: gather neighbour timers over the contact pairs, then decide per body."""
         m = self.model
         if contacts is not None and contacts.pair_max > 0:
-            launch(gather_neighbour_timers, contacts.pair_max, key=self, inputs=[
-                contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass,
-                self.body_sleep_timer, self.body_neighbour_timer], device=self.device)
+            wp.launch(gather_neighbour_timers, dim=contacts.pair_max, device=self.device, inputs=[
+                0, contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass,
+                self.body_sleep_timer, self.body_neighbour_timer])  # atomics: never split (see above)
         launch(update_sleep, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_bound_radius, dt, self.sleep_velocity, self.sleep_time,
             state.body_rot, state.body_vel, state.body_angmom, self.body_sleep_timer, self.body_neighbour_timer,

@@ -308,7 +308,7 @@ def impact_pair(
     hit = int(0)
     for k in range(count):
         now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi, dpj,
-                             dri, drj, radius_i, radius_j)
+                             dri, drj, radius_i, radius_j, inv_mi, inv_mj)
         vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
         if engaged(now.separation, vn, h):
             acc[k] = 0.0
@@ -320,7 +320,7 @@ def impact_pair(
         for k in range(count):
             if acc[k] >= 0.0:
                 now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj,
-                                     dpi, dpj, dri, drj, radius_i, radius_j)
+                                     dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
                 n = now.normal
                 rni = wp.cross(now.arm_i, n)
                 rnj = wp.cross(now.arm_j, n)
@@ -336,7 +336,7 @@ def impact_pair(
     for k in range(count):
         if acc[k] > 0.0:
             now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi,
-                                 dpj, dri, drj, radius_i, radius_j)
+                                 dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
             n = now.normal
             bounce = e * acc[k]
             vi = vi + (inv_mi * bounce) * n
@@ -350,7 +350,7 @@ def impact_pair(
             for k in range(count):
                 if acc[k] > 0.0:
                     now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi,
-                                         xj, dpi, dpj, dri, drj, radius_i, radius_j)
+                                         xj, dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
                     n = now.normal
                     ri = now.arm_i
                     rj = now.arm_j

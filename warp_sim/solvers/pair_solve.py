@@ -124,7 +124,7 @@ def solve_one_pair(
         slot = p * POINTS + k
         # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
         now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], xi, xj, drift_pi, drift_pj,
-                             drift_ri, drift_rj, radius_i, radius_j)
+                             drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
         n = now.normal
         ri = now.arm_i
         rj = now.arm_j
@@ -255,7 +255,8 @@ def warm_start_pair_side(
     for k in range(pair_point_count[p]):
         slot = p * POINTS + k
         now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], x_i, x_j, drift_pi, drift_pj,
-                             drift_ri, drift_rj, body_sphere_radius[i], body_sphere_radius[j])
+                             drift_ri, drift_rj, body_sphere_radius[i], body_sphere_radius[j],
+                             body_inv_mass[i], body_inv_mass[j])
         arm = wp.where(side == 0, now.arm_i, now.arm_j)
         impulse = sign * (pair_normal_impulse[slot] * now.normal + pair_tangent_impulse[slot])
         v = v + inv_mass * impulse
