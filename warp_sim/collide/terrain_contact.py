@@ -257,7 +257,9 @@ def collide_terrain(
         point_vel = v + wp.cross(omega, point - x)
         approach = wp.max(-wp.dot(point_vel, normal), 0.0)
         gap_closable = speculative_margin + h * approach + h * h * gravity_length
-        if depth > -gap_closable:
+        # a refreshed sphere keeps its slot whatever the gap: the step's pass opened it for the
+        # whole step, and closing it here would hide the surface from the later substeps
+        if depth > -gap_closable or refresh_spheres != 0:
             active += 1
             if refresh_spheres != 0:
                 shift = x - reference_pos[body]
