@@ -126,8 +126,8 @@ def info_command(args) -> int:
     cfg = scene.config
     sim = scene.build("cpu")
     memory = array_bytes(sim)
-    shapes = sim.model.body_shape.numpy()
-    static = sim.model.body_inv_mass.numpy() == 0.0
+    shapes = sim.model.host["body_shape"]
+    static = sim.model.host["body_inv_mass"] == 0.0
     spheres = int(np.count_nonzero(shapes == SHAPE_SPHERE))
     boxes = len(shapes) - spheres
     moving_spheres = int(np.count_nonzero((shapes == SHAPE_SPHERE) & ~static))

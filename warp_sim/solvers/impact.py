@@ -113,6 +113,11 @@ def impact_begin_body(
 
 
 @wp.func
+def row3(m: wp.mat44, k: int) -> wp.vec3:
+    return wp.vec3(m[k, 0], m[k, 1], m[k, 2])
+
+
+@wp.func
 def engaged(gap: float, vn: float, h: float) -> bool:
     return gap <= 0.0 or gap + h * vn < 0.0
 
@@ -304,11 +309,19 @@ def impact_pair(
     wi = solver_w[i]
     vj = solver_v[j]
     wj = solver_w[j]
+    # the points' geometry at the current pose, found once: rows k of normal, arm_i, arm_j
+    normal = wp.mat44(0.0)
+    arm_i = wp.mat44(0.0)
+    arm_j = wp.mat44(0.0)
     acc = wp.vec4(NOT_ENGAGED)
     hit = int(0)
     for k in range(count):
         now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi, dpj,
                              dri, drj, radius_i, radius_j, inv_mi, inv_mj)
+        for axis in range(3):
+            normal[k, axis] = now.normal[axis]
+            arm_i[k, axis] = now.arm_i[axis]
+            arm_j[k, axis] = now.arm_j[axis]
         vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
         if engaged(now.separation, vn, h):
             acc[k] = 0.0
@@ -319,13 +332,13 @@ def impact_pair(
     for _it in range(IMPACT_ITERATIONS):
         for k in range(count):
             if acc[k] >= 0.0:
-                now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj,
-                                     dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
-                n = now.normal
-                rni = wp.cross(now.arm_i, n)
-                rnj = wp.cross(now.arm_j, n)
+                n = row3(normal, k)
+                ri = row3(arm_i, k)
+                rj = row3(arm_j, k)
+                rni = wp.cross(ri, n)
+                rnj = wp.cross(rj, n)
                 k_n = inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
-                vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), n)
+                vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
                 new_acc = wp.max(acc[k] - vn / k_n, 0.0)
                 d = new_acc - acc[k]
                 acc[k] = new_acc
@@ -335,28 +348,24 @@ def impact_pair(
                 wj = wj - inv_ij * (rnj * d)
     for k in range(count):
         if acc[k] > 0.0:
-            now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi,
-                                 dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
-            n = now.normal
+            n = row3(normal, k)
             bounce = e * acc[k]
             vi = vi + (inv_mi * bounce) * n
-            wi = wi + inv_ii * (wp.cross(now.arm_i, n) * bounce)
+            wi = wi + inv_ii * (wp.cross(row3(arm_i, k), n) * bounce)
             vj = vj - (inv_mj * bounce) * n
-            wj = wj - inv_ij * (wp.cross(now.arm_j, n) * bounce)
+            wj = wj - inv_ij * (wp.cross(row3(arm_j, k), n) * bounce)
     mu = wp.sqrt(body_friction[i] * body_friction[j])
     if mu > 0.0:
         tangent = wp.mat44(0.0)  # rows: the accumulated tangential impulse of each point (x, y, z, -)
         for _it in range(2):
             for k in range(count):
                 if acc[k] > 0.0:
-                    now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi,
-                                         xj, dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
-                    n = now.normal
-                    ri = now.arm_i
-                    rj = now.arm_j
+                    n = row3(normal, k)
+                    ri = row3(arm_i, k)
+                    rj = row3(arm_j, k)
                     vr = vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj)
                     vt = vr - wp.dot(vr, n) * n
-                    old_t = wp.vec3(tangent[k, 0], tangent[k, 1], tangent[k, 2])
+                    old_t = row3(tangent, k)
                     k_t = inv_mi + inv_mj
                     slip = wp.length(vt)
                     if slip > 1.0e-9:
