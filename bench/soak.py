@@ -9,7 +9,8 @@ non-finite state), that the total energy (kinetic + potential) has not risen by 
 damping only remove energy, so any gain between checks is the solver adding some), that no body is deeper than 1 cm in the terrain or another body, and
 that the resident memory (RSS, /proc/self/statm) has not grown by more than ``--rss-slack-mb``
 since the first check (leaks of per-step allocations show here).  Sleeping is off so that every
-step runs the whole solver.  The figures and the verdict go to bench/results/soak.json; the exit
+step runs the whole solver.  By default the step is captured once as a graph and replayed (the
+path CUDA takes); ``--no-graph`` launches kernel by kernel.  The figures and the verdict go to bench/results/soak.json; the exit
 status is 1 when a check failed.
 """
 
@@ -79,6 +80,9 @@ def main(argv=None) -> int:
     p.add_argument("--check-every", type=int, default=1000, metavar="K")
     p.add_argument("--energy-slack", type=float, default=0.5, help="allowed energy gain [J] (default 0.5)")
     p.add_argument("--rss-slack-mb", type=float, default=64.0, help="allowed RSS growth [MiB] (default 64)")
+    p.add_argument("--graph", action=argparse.BooleanOptionalAction, default=True,
+                   help="capture the whole step as one graph and replay it (default on: about 3x fewer "
+                        "host calls per step on the CPU; --no-graph steps kernel by kernel)")
     p.add_argument("--out", type=Path, default=RESULTS / "soak.json")
     args = p.parse_args(argv)
     if args.steps < 1 or args.check_every < 1:
@@ -89,7 +93,8 @@ def main(argv=None) -> int:
     wp.config.quiet = True
     from warp_sim.scene import parse_scene
 
-    scene = parse_scene(__import__("tomllib").loads(SCENE), "soak")
+    text = SCENE.replace("sleep = false", f"sleep = false\ngraph = {'true' if args.graph else 'false'}")
+    scene = parse_scene(__import__("tomllib").loads(text), "soak")
     sim = scene.build("cpu")
     e0 = total_energy(sim)
     rows, failures = [], []
@@ -136,6 +141,7 @@ def main(argv=None) -> int:
         "steps": done,
         "requested_steps": args.steps,
         "bodies": sim.model.body_count,
+        "graph": args.graph,
         "wall_s": elapsed,
         "steps_per_s": done / elapsed if elapsed > 0 else None,
         "start_energy_j": e0,
