@@ -35,6 +35,7 @@ instead: ContactOverflowError (a captured call restores its starting state first
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 import warnings
@@ -44,7 +45,8 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_terrain
-from .collide.pair_pipeline import PairContactPipeline, default_pair_capacity
+from .collide.narrow_phase import reach_outrun
+from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
 from .launch import cpu_threads, launch
 from .model import Model
@@ -90,6 +92,7 @@ class SimConfig:
     broad_phase: str = "grid"
     contact_max: int = 0
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
+    recollide_outrun: bool = True  # "step" updates: find the pairs again mid-step if a body outruns its reach
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
     allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
     graph: bool | None = None  # capture the whole step as one graph and replay it; None: on CUDA only
@@ -128,6 +131,22 @@ def note_pair_overflow(pair_demand: wp.array(dtype=wp.int64), capacity: int, ove
     """overflow[0] = the largest demand of the steps since it was cleared, once it exceeded capacity."""
     if pair_demand[0] > wp.int64(capacity):
         overflow[0] = wp.max(overflow[0], pair_demand[0])
+
+
+@wp.kernel
+def count_outrun_pass(passes: wp.array(dtype=wp.int32)):
+    passes[0] = passes[0] + 1
+
+
+@dataclass
+class ReferencePose:
+    """The poses at which a step's contacts were found, with the velocities of now: what a
+    mid-step pass collides (Simulator._recollide_outrun)."""
+
+    body_pos: wp.array
+    body_rot: wp.array
+    body_vel: wp.array
+    body_angmom: wp.array
 
 
 class Simulator:
@@ -171,6 +190,8 @@ class Simulator:
         self.contacts = model.contacts(capacity)
         self._probe = model.contacts(capacity)
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
+        self.outrun = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self.outrun_passes = wp.zeros(1, dtype=wp.int32, device=self.device)  # mid-step passes run, ever
         self._saved = None  # the state at the start of a step() call, when its steps are captured
         self._warm = False
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -273,14 +294,58 @@ class Simulator:
         color_sizes = self._collide_pass(dt, margin, dt)
         refresh = self._refreshes_spheres()
         for k in range(self.config.substeps):
+            if k > 0 and self.config.recollide_outrun:
+                self._stage("pairs", self._recollide_outrun, dt - k * h, margin)
+                color_sizes = self._color_sizes
             if k > 0 and refresh:
                 self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin, True)
+            after_impacts = None
+            if self.config.recollide_outrun and self.physics_model.has_restitution:
+                after_impacts = functools.partial(self._recollide_outrun, dt - k * h, margin, True)
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule(),
-                        k > 0 and refresh)
+                        k > 0 and refresh, after_impacts)
+            color_sizes = self._color_sizes
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._stage("solve", self.pairs.store, self.contacts)
         self._keep_output_buffer()
+
+    def _recollide_outrun(self, remaining: float, margin: float, after_impacts: bool = False, impacts_again=None):
+        """Find the pairs again, only if some body has sped up beyond the reach the step's pass
+        gave it (a ball at rest struck by one at 40 m/s crosses 0.67 m in the step that hit it;
+        its pair with a wall 13 cm away was never found, and it went through).  Checked before
+        each later substep, and, in a scene with restitution, between each substep's impact stage
+        and its solve (``after_impacts``: the struck body would otherwise cross h v unchecked
+        in that substep).  ``remaining``: the time left in the step.  The new pass runs at the
+        step's reference pose, so the manifolds found then and now share one pose and the
+        substeps' anchors stay valid; the impulses so far are kept as its warm start.  The flag
+        is read on the device (wp.capture_if): a captured step records the pass as a conditional
+        node.  Terrain contacts are not found again (spheres' are, every substep; a box struck
+        into the terrain mid-step is caught by the terrain slots' own speculative window).
+        ``impacts_again``: the solver's impact sweeps, rerun after a pass made between the impact
+        stage and the solve, so that the contacts it found bounce in this substep."""
+        m = self.physics_model
+        solver = self.solver
+        state = self.states[0]
+        self.outrun.zero_()
+        wp.launch(reach_outrun, dim=m.body_count, device=self.device, inputs=[  # atomics: never split
+            m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, remaining, self._gravity_magnitude, margin,
+            int(after_impacts), solver.solver_ref_pos, state.body_pos, state.body_rot, state.body_vel,
+            state.body_angmom, solver.solver_v, solver.solver_w, self.pairs.body_reach, self.outrun])
+
+        def recollide():
+            reference = ReferencePose(solver.solver_ref_pos, solver.solver_ref_rot, state.body_vel,
+                                      state.body_angmom)
+            moved = MovedBodies(state.body_pos, state.body_rot, state.body_vel, state.body_angmom, solver.solver_v,
+                                solver.solver_w, int(after_impacts))
+            self.pairs.store(self.contacts)
+            self._collide_pairs(margin, remaining, reference, moved)
+            wp.launch(count_outrun_pass, dim=1, device=self.device, inputs=[self.outrun_passes])
+            if impacts_again is not None:
+                impacts_again(self._color_sizes)
+
+        wp.capture_if(self.outrun, on_true=recollide)
+        return self._color_sizes
 
     def _refreshes_spheres(self) -> bool:
         """Spheres' terrain contacts are found every substep (collide_terrain): a sphere has one
@@ -322,21 +387,23 @@ class Simulator:
             self.states[0], self.states[1] = self.states[1], self.states[0]
         self._keep_output_buffer()
 
-    def _collide_pairs(self, margin: float, sweep_time: float):
-        """The pair pipeline on states[0]; grows the buffers first if they would overflow (direct
+    def _collide_pairs(self, margin: float, sweep_time: float, state=None, moved=None):
+        """The pair pipeline on states[0] (or on ``state``, with ``moved``: a mid-step pass, see
+        PairContactPipeline.collide); grows the buffers first if they would overflow (direct
         stepping checks on the host right after the broad phase; a captured step raises the
         device flag that ``step`` reads)."""
+        state = self.states[0] if state is None else state
 
         def grow(demand: int):
             if self.config.contact_max:
                 self.contacts.pair_demand.assign(np.array([demand], dtype=np.int64))
                 self.contacts.check_overflow()
             self._grow(demand)
-            return self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, self._gravity_magnitude,
-                                      on_overflow=grow)
+            return self.pairs.collide(state, self.contacts, margin, sweep_time, self._gravity_magnitude,
+                                      on_overflow=grow, moved=moved)
 
-        sizes = self.pairs.collide(self.states[0], self.contacts, margin, sweep_time, self._gravity_magnitude,
-                                   on_overflow=grow)
+        sizes = self.pairs.collide(state, self.contacts, margin, sweep_time, self._gravity_magnitude,
+                                   on_overflow=grow, moved=moved)
         if self.pairs.capturable:
             wp.launch(note_pair_overflow, dim=1, device=self.device,
                       inputs=[self.contacts.pair_demand, self.pairs.capacity, self.pair_overflow])

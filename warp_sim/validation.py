@@ -379,6 +379,7 @@ SIM_SCHEMA = {
     "broad_phase": Choice(_broad_phases()),
     "contact_max": Integer(ge=0),
     "contact_update": Choice(CONTACT_UPDATES),
+    "recollide_outrun": Boolean(),
     "pair_schedule": Choice(PAIR_SCHEDULES),
     "allow_initial_overlap": Boolean(),
     "graph": Boolean(),

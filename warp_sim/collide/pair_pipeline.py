@@ -21,7 +21,7 @@ from ..launch import LIGHT_CHUNK, launch
 from ..solvers.coloring import COLOR_COUNT, PairColoring
 from ..solvers.domains import BINS, partition_domains
 from .broad_phase import make_broad_phase
-from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach
+from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach, swept_reach_from_reference
 
 
 class PairContactPipeline:
@@ -62,7 +62,7 @@ class PairContactPipeline:
                                            self.boundary_body_count, self.boundary_body)
 
     def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, gravity: float = 0.0,
-                on_overflow=None) -> list[int]:
+                on_overflow=None, moved=None) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
 
         ``on_overflow(demand)``: when not capturable, called once the broad phase has found more
@@ -72,11 +72,22 @@ class PairContactPipeline:
         ``sweep_time`` is the time until the next collision pass: each body's bounding sphere
         grows by how far it can move in it (narrow_phase.swept_reach; ``gravity`` is |g|), so a
         pair found once per step still covers contacts made late in the step.
+
+        ``moved``: a pass run mid-step (Simulator._recollide_outrun).  ``state`` then holds the
+        poses at which the step's contacts were found (the solver's reference) and ``moved`` the
+        bodies now (a MovedBodies); the pairs are found at the reference pose, so that every manifold of the step
+        is measured from one pose, with reaches grown by the way each body has come since.
         """
         m = self.model
-        launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
-            m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, float(sweep_time), float(gravity),
-            state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
+        if moved is None:
+            launch(swept_reach, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
+                m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, float(sweep_time), float(gravity),
+                state.body_rot, state.body_vel, state.body_angmom, self.body_reach], device=self.device)
+        else:
+            launch(swept_reach_from_reference, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
+                m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, float(sweep_time), float(gravity),
+                moved.use_solver_velocity, state.body_pos, moved.body_pos, moved.body_rot, moved.body_vel,
+                moved.body_angmom, moved.solver_v, moved.solver_w, self.body_reach], device=self.device)
         # the grid cell follows the largest swept radius, found on the device
         self.broad.run(state.body_pos, self.body_reach, m.body_inv_mass, margin, radii_vary=True)
         # direct stepping: threads for the pairs found only (capturable: for the capacity)
@@ -148,6 +159,21 @@ class PairContactPipeline:
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
             contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse],
             device=self.device)
+
+
+@dataclass
+class MovedBodies:
+    """The bodies mid-step, for a pass at the reference pose (PairContactPipeline.collide):
+    poses now, and velocities either the state's or (``use_solver_velocity`` = 1) the impact
+    stage's solver_v / solver_w."""
+
+    body_pos: wp.array
+    body_rot: wp.array
+    body_vel: wp.array
+    body_angmom: wp.array
+    solver_v: wp.array
+    solver_w: wp.array
+    use_solver_velocity: int
 
 
 @dataclass

@@ -83,7 +83,7 @@ class SoftStepSolver:
         return self._soft_value
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
-             fresh_contacts: bool = True, domains=None, rebuild_rows: bool = False):
+             fresh_contacts: bool = True, domains=None, rebuild_rows: bool = False, after_impacts=None):
         """One substep.  ``color_sizes`` (pairs per colour, host ints) selects the staged path.
 
         ``fresh_contacts``: the contacts were found at ``state_in`` (else at an earlier substep's
@@ -92,6 +92,12 @@ class SoftStepSolver:
         (solvers/domains.py) instead of colour by colour.
         ``rebuild_rows``: some terrain contacts were found again since the last substep (the
         simulator's sphere refresh), so every body's rows are rebuilt.
+        ``after_impacts(impacts_again)``: called between the impact stage and the solve (a scene
+        with restitution), with the post-impact velocities in solver_v / solver_w; it may find
+        the pairs again (Simulator._recollide_outrun), then calls ``impacts_again(colour sizes)``
+        so that the contacts just found get their impacts in this substep too (a speculative
+        contact left to the solve would stop the body at the wall and lose its bounce); it
+        returns the colour sizes to solve with.
         """
         self._rebuild_rows = rebuild_rows
         if self.settings.solver == "pushout":
@@ -101,7 +107,7 @@ class SoftStepSolver:
             self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
         else:
             self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                              fresh_contacts, domains)
+                              fresh_contacts, domains, after_impacts)
 
     def _terrain_rows(self, model, contacts):
         """Row storage (one per slot, packed per body; contact_rows.py) and each body's row count."""
@@ -208,6 +214,9 @@ class SoftStepSolver:
             int(fresh_contacts), state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_ref_pos, self.solver_ref_rot,
             self.solver_drift_p, self.solver_drift_r], device=self.device)
+        self._impact_sweeps(m, c, dt, pairs)
+
+    def _impact_sweeps(self, m, c, dt, pairs):
         for _ in range(IMPACT_SWEEPS):
             launch(terrain_impact, m.body_count, key=self, inputs=[
                 m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
@@ -218,10 +227,10 @@ class SoftStepSolver:
             pairs(MODE_IMPACT)
 
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                     fresh_contacts, domains=None):
+                     fresh_contacts, domains=None, after_impacts=None):
         if domains is not None:
             self._step_domains(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, fresh_contacts,
-                               domains)
+                               domains, after_impacts)
             return
         s = self.settings
         m, c = model, contacts
@@ -256,6 +265,13 @@ class SoftStepSolver:
 
         if m.has_restitution:
             self._impacts(m, c, state_in, dt, integrator, fresh_contacts, pairs)
+            if after_impacts is not None:
+                def impacts_again(sizes):
+                    nonlocal color_sizes
+                    color_sizes = sizes
+                    self._impact_sweeps(m, c, dt, pairs)
+
+                color_sizes = after_impacts(impacts_again)
         self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, m.has_restitution)
         pairs(MODE_WARM_START)
         for _ in range(s.iterations):
@@ -267,7 +283,8 @@ class SoftStepSolver:
             pairs(MODE_RELAX_CLOSED if m.has_restitution else MODE_RELAX)
         self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
-    def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g):
+    def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g,
+                      after_impacts=None):
         """The staged soft step swept slab by slab (solvers/domains.py).
 
         Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the relax
@@ -329,6 +346,12 @@ class SoftStepSolver:
         # a scene without restitution pays for no impact sweeps (impact.py)
         for k in range(IMPACT_SWEEPS if impacts else 0):
             sweep(MODE_IMPACT, k % 2, prepare=int(k == 0))
+        if impacts and after_impacts is not None:
+            def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
+                for k in range(IMPACT_SWEEPS):
+                    sweep(MODE_IMPACT, k % 2)
+
+            after_impacts(impacts_again)
         if iterations == 0:
             self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, impacts)
             sweep(MODE_WARM_START, 0)
