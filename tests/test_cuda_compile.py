@@ -48,7 +48,7 @@ def test_every_kernel_module_compiles_for_sm90():
     import warp as wp
 
     names = kernel_modules()
-    assert "warp_sim.solvers.coloring" in names and len(names) >= 12
+    assert "warp_sim.schedule.coloring" in names and len(names) >= 12
     workers = max(1, min(len(names), os.cpu_count() or 1))
     ctx = multiprocessing.get_context("spawn")
     env_path = os.environ.get("PYTHONPATH", "")

@@ -1,4 +1,4 @@
-"""The CPU pair schedule (solvers/domains.py): slabs that cover every body and pair exactly once."""
+"""The CPU pair schedule (schedule/slabs.py cuts, solvers/domains.py sweeps): slabs that cover every body and pair exactly once."""
 
 import itertools
 
@@ -7,7 +7,7 @@ import pytest
 
 from warp_sim import ModelBuilder, PlaneTerrain, SimConfig, Simulator, cases
 from warp_sim.builder import Material
-from warp_sim.solvers.domains import BINS, CUT_SLACK
+from warp_sim.schedule.slabs import BINS, CUT_SLACK
 
 DOMAINS = 3  # more slabs than this machine may have cores: the schedule must not depend on them
 

@@ -11,7 +11,7 @@ import pytest
 import warp_sim.simulator as simulator
 from warp_sim import ModelBuilder, PlaneTerrain, SimConfig, Simulator
 from warp_sim.builder import Material
-from warp_sim.solvers.coloring import COLOR_COUNT
+from warp_sim.schedule.coloring import COLOR_COUNT
 
 
 def digest(sim) -> str:

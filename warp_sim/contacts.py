@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .solvers.coloring import COLOR_COUNT
+from .schedule.coloring import COLOR_COUNT
 
 POINTS_PER_PAIR = 4
 
@@ -90,7 +90,7 @@ class Contacts:
         self.prev_pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
         self.prev_pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
         self.prev_pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
-        # graph colouring of the pairs (solvers/coloring.py): colour c holds
+        # graph colouring of the pairs (schedule/coloring.py): colour c holds
         # color_pairs_sorted[color_start[c]:color_start[c + 1]]; the last colour is the overflow set
         self.color_start = wp.zeros(COLOR_COUNT + 2, dtype=wp.int32, device=device)
         self.color_pairs_sorted = wp.zeros(m, dtype=wp.int32, device=device)

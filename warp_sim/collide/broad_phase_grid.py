@@ -139,6 +139,7 @@ def grid_bucket_ranges(
     tid_offset: int,
     # Model
     body_bound_radius: wp.array(dtype=float),
+    # In (mark_static: 1 where the inverse mass is 0)
     body_static: wp.array(dtype=wp.int32),
     # State in
     body_pos: wp.array(dtype=wp.vec3),
@@ -343,6 +344,7 @@ def grid_hash_rows(
     tid_offset: int,
     # Model
     body_bound_radius: wp.array(dtype=float),
+    # In (mark_static: 1 where the inverse mass is 0)
     body_static: wp.array(dtype=wp.int32),
     # State in
     body_pos: wp.array(dtype=wp.vec3),

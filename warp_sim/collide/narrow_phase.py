@@ -29,12 +29,13 @@ def collide_pairs(
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
     body_bound_radius: wp.array(dtype=float),
+    # Settings
     margin: float,
     # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
-    body_reach: wp.array(dtype=float),
     # Broad phase in
+    body_reach: wp.array(dtype=float),
     broad_pair_body: wp.array(dtype=wp.vec2i),
     broad_pair_count: wp.array(dtype=wp.int32),
     # Out
@@ -164,12 +165,14 @@ def swept_reach_from_reference(
     remaining_time: float,
     gravity_magnitude: float,
     use_solver_velocity: int,
-    # State in
+    # Solver in
     solver_ref_pos: wp.array(dtype=wp.vec3),
+    # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
+    # Solver in
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
     # Out
@@ -193,14 +196,17 @@ def reach_outrun(
     gravity_magnitude: float,
     margin: float,
     use_solver_velocity: int,
-    # State in
+    # Solver in
     solver_ref_pos: wp.array(dtype=wp.vec3),
+    # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
+    # Solver in
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
+    # In (the pass's reaches)
     body_reach: wp.array(dtype=float),
     # Out
     outrun: wp.array(dtype=wp.int32),

@@ -18,8 +18,8 @@ import numpy as np
 import warp as wp
 
 from ..launch import LIGHT_CHUNK, launch
-from ..solvers.coloring import COLOR_COUNT, PairColoring
-from ..solvers.domains import BINS, partition_domains
+from ..schedule.coloring import COLOR_COUNT, PairColoring
+from ..schedule.slabs import BINS, partition_domains
 from .broad_phase import make_broad_phase
 from .narrow_phase import carry_pair_impulses, collide_pairs, store_pairs, swept_reach, swept_reach_from_reference
 

@@ -150,6 +150,7 @@ def collide_terrain(
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
+    # Solver in (the pose of the step's pass)
     reference_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
     terrain_contact_active: wp.array(dtype=wp.int32),

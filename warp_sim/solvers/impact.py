@@ -394,17 +394,21 @@ def impact_pair(
 @wp.kernel
 def impact_begin(
     tid_offset: int,
+    # Model
     body_inv_mass: wp.array(dtype=float),
     body_inv_inertia: wp.array(dtype=wp.vec3),
+    # Settings
     gravity: wp.vec3,
     h: float,
     integrator: int,
     rotation: int,
     reset_reference: int,
+    # State in
     body_pos: wp.array(dtype=wp.vec3),
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
+    # Solver out
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
     solver_inv_inertia: wp.array(dtype=wp.mat33),
@@ -421,23 +425,28 @@ def impact_begin(
 @wp.kernel
 def terrain_impact(
     tid_offset: int,
+    # Model
     body_inv_mass: wp.array(dtype=float),
     body_friction: wp.array(dtype=float),
     body_restitution: wp.array(dtype=float),
     body_checkpoint_start: wp.array(dtype=wp.int32),
     body_checkpoint_count: wp.array(dtype=wp.int32),
+    # Settings
     h: float,
     restitution_threshold: float,
+    # Contacts in
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
     terrain_contact_normal: wp.array(dtype=wp.vec3),
     terrain_contact_depth: wp.array(dtype=float),
+    # Solver in/out
     solver_inv_inertia: wp.array(dtype=wp.mat33),
     solver_ref_pos: wp.array(dtype=wp.vec3),
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
+    # Scratch
     impact_normal: wp.array(dtype=float),
     impact_tangent: wp.array(dtype=wp.vec3),
 ):

@@ -7,7 +7,7 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 
 import warp as wp
 
-from .coloring import color_range
+from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .pair_geometry import pair_point_now
 

@@ -18,7 +18,7 @@ impulses, which never accumulate, cannot hold a resting load still.
 
 import warp as wp
 
-from .coloring import color_range
+from ..schedule.coloring import color_range
 from .pair_solve import PairVelocity, apply_pair_impulse, normal_mass_inverse, relative_velocity
 from .soft_step import BodyVelocity, apply_impulse
 

@@ -14,7 +14,7 @@ import warp as wp
 
 from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
-from .coloring import COLOR_COUNT
+from ..schedule.coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position

@@ -121,18 +121,22 @@ def color_claim(
 @wp.kernel
 def color_pick(
     tid_offset: int,
+    # Settings
     round: int,
     last_round: int,
     phase: int,
+    # Model
     body_inv_mass: wp.array(dtype=float),
+    # Contacts in
     pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
+    # In (this round's priorities)
     body_best: wp.array(dtype=wp.int64),
     body_least: wp.array(dtype=wp.int64),
-    # in/out: a body's mask is written only by the one pair that holds its maximum this round
+    # Out: a body's mask is written only by the one pair that holds its maximum this round
     body_color_mask: wp.array(dtype=wp.int64),
     pair_color: wp.array(dtype=wp.int32),
-    # any writer stores 1
+    # Out: any writer stores 1
     pending: wp.array(dtype=wp.int32),
     overflow: wp.array(dtype=wp.int32),
 ):
