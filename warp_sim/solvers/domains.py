@@ -124,6 +124,7 @@ def domain_sweep(
     solver_ref_rot: wp.array(dtype=wp.mat33),
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
     terrain_row: wp.array(dtype=TerrainRow),
     terrain_row_count: wp.array(dtype=wp.int32),
     impact_normal: wp.array(dtype=float),
@@ -164,7 +165,7 @@ def domain_sweep(
             integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
                            body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
                            solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                           solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+                           solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
             finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in, body_vel_in,
                           body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out, body_vel_out,
                           body_angmom_out, body_bad_step, bad_count)
@@ -174,17 +175,17 @@ def domain_sweep(
     if d == domain_count:
         for q in range(pair_count):
             solve_one_pair(domain_pair[walk(pair_first, pair_count, q, reverse)], mode, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
-                           solver_v, solver_w)
+                           solver_v, solver_w, solver_toi_shift)
         for k in range(boundary_body_count[0]):
             i = boundary_body[k]
             if integrate != 0:
                 integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
                                body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
                                solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                               solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+                               solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
             if finalize != 0:
                 finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
                               body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
@@ -197,7 +198,7 @@ def domain_sweep(
             impact_begin_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, gravity, h, integrator,
                               rotation, reset_reference, body_pos_in, body_rot_in, body_vel_in, body_angmom_in,
                               solver_v, solver_w, solver_inv_inertia, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                              solver_drift_r)
+                              solver_drift_r, solver_toi_shift)
     elif prepare != 0:
         for k in range(body_count):
             prepare_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, body_checkpoint_start,
@@ -210,10 +211,10 @@ def domain_sweep(
                          terrain_row_count)
         for k in range(pair_count):
             solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity, restitution_threshold, pair_body,
+                           body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity, restitution_threshold, pair_body,
                            pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                            pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
-                           solver_v, solver_w)
+                           solver_v, solver_w, solver_toi_shift)
         # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
         # boundary impulse applied after the first sweep let a stack split across two slabs sag
         # 27 mm instead of 7)
@@ -238,10 +239,10 @@ def domain_sweep(
                 for k in range(body_count):
                     impact_terrain_body(domain_body[walk(body_first, body_count, k, reverse)], body_inv_mass,
                                         body_friction, body_restitution, body_checkpoint_start, body_checkpoint_count,
-                                        h, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                                        h, gravity, restitution_threshold, terrain_contact_active, terrain_contact_point,
                                         terrain_contact_normal, terrain_contact_depth, solver_inv_inertia,
                                         solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w,
-                                        impact_normal, impact_tangent)
+                                        solver_toi_shift, impact_normal, impact_tangent)
             elif terrain:
                 for k in range(body_count):
                     sweep_body_terrain(domain_body[walk(body_first, body_count, k, reverse)], body_shape, body_size,
@@ -253,11 +254,11 @@ def domain_sweep(
         else:
             for k in range(pair_count):
                 solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,
-                               body_friction, body_restitution, body_rolling_arm, body_sphere_radius, h, soft, max_push_velocity,
+                               body_friction, body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity,
                                restitution_threshold,
                                pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
                                pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
-                               solver_drift_r, solver_v, solver_w)
+                               solver_drift_r, solver_v, solver_w, solver_toi_shift)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
             i = domain_body[body_first + k]
@@ -267,7 +268,7 @@ def domain_sweep(
                 integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
                                body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
                                solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                               solver_drift_r, body_pos_out, body_quat_out, body_rot_out)
+                               solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
             if finalize != 0:
                 finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
                               body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,

@@ -66,6 +66,7 @@ def solve_one_pair(
     body_rolling_arm: wp.array(dtype=float),
     body_sphere_radius: wp.array(dtype=float),
     h: float,
+    gravity: wp.vec3,
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
@@ -82,12 +83,14 @@ def solve_one_pair(
     solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
 ):
     if mode == MODE_IMPACT:
-        impact_pair(p, body_inv_mass, body_friction, body_restitution, body_sphere_radius, h, restitution_threshold,
+        impact_pair(p, body_inv_mass, body_friction, body_restitution, body_sphere_radius, h, gravity,
+                    restitution_threshold,
                     pair_body,
                     pair_point_count, pair_normal, pair_point, pair_depth, solver_inv_inertia, solver_ref_pos,
-                    solver_drift_p, solver_drift_r, solver_v, solver_w)
+                    solver_drift_p, solver_drift_r, solver_v, solver_w, solver_toi_shift)
         return
     ij = pair_body[p]
     i = ij[0]
@@ -280,6 +283,7 @@ def pair_pass(
     body_sphere_radius: wp.array(dtype=float),
     # Settings
     h: float,
+    gravity: wp.vec3,
     soft: wp.vec3,
     max_push_velocity: float,
     restitution_threshold: float,
@@ -298,11 +302,13 @@ def pair_pass(
     solver_drift_r: wp.array(dtype=wp.mat33),
     solver_v: wp.array(dtype=wp.vec3),
     solver_w: wp.array(dtype=wp.vec3),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
         solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution,
-                       body_rolling_arm, body_sphere_radius, h, soft,
+                       body_rolling_arm, body_sphere_radius, h, gravity, soft,
                        max_push_velocity, restitution_threshold, pair_body, pair_point_count,
                        pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
-                       solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)
+                       solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w,
+                       solver_toi_shift)

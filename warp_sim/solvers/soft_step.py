@@ -342,15 +342,17 @@ def solve_and_integrate(
         touching = touching | terrain_contact_active[slot]
     zero = wp.vec3(0.0)
     no_turn = wp.mat33(0.0)
+    toi_shift = wp.vec3(0.0)
     e = body_restitution[i]
     if touching != 0 and e > 0.0:
         # impacts act on the velocity the last solve left, without this substep's gravity
         v_last = body_vel_in[i] - ((1.0 - alpha) * h) * gravity
-        vw = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
-                            h, restitution_threshold, terrain_contact_active, terrain_contact_point,
-                            terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
-        vel.v = wp.spatial_bottom(vw) + h * gravity
-        vel.w = wp.spatial_top(vw)
+        hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
+                             h, gravity, restitution_threshold, terrain_contact_active, terrain_contact_point,
+                             terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
+        vel.v = hit.v + h * gravity
+        vel.w = hit.w
+        toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
 
     # Warm start
     vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, terrain_contact_active,
@@ -374,12 +376,13 @@ def solve_and_integrate(
     new_angmom = angmom
     if touching != 0:
         new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
-    x_new = x + h * vel.v
+    step = h * vel.v + toi_shift
+    x_new = x + step
     q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], new_angmom, h, integrator, rotation)
 
     if touching != 0:
         relax_bias = wp.where(e > 0.0, -1, 0)
-        shift_v = h * vel.v
+        shift_v = step
         shift_r = drift_rotation(body_shape[i], rot_new, rot)
         for _it in range(relax_iterations):
             before = vel

@@ -74,6 +74,8 @@ class SoftStepSolver:
         self.solver_ref_rot = wp.zeros(n, dtype=wp.mat33, device=device)
         self.solver_drift_p = wp.zeros(n, dtype=wp.vec3, device=device)
         self.solver_drift_r = wp.zeros(n, dtype=wp.mat33, device=device)
+        # an impact's time-of-impact position shift, spent by the next integration (impact.py)
+        self.solver_toi_shift = wp.zeros(n, dtype=wp.vec3, device=device)
 
     def _soft(self, dt: float):
         # one vec3 object per dt, so recorded launches see an unchanged argument
@@ -164,7 +166,7 @@ class SoftStepSolver:
             ROTATIONS[self.settings.rotation],
             state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
             self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
-            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r,
+            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift,
             state_out.body_pos, state_out.body_quat, state_out.body_rot], device=self.device)
 
     def _step_fused(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count):
@@ -213,17 +215,17 @@ class SoftStepSolver:
             m.body_inv_mass, m.body_inv_inertia, self.gravity, dt, integrator, ROTATIONS[self.settings.rotation],
             int(fresh_contacts), state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_ref_pos, self.solver_ref_rot,
-            self.solver_drift_p, self.solver_drift_r], device=self.device)
+            self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift], device=self.device)
         self._impact_sweeps(m, c, dt, pairs)
 
     def _impact_sweeps(self, m, c, dt, pairs):
         for _ in range(IMPACT_SWEEPS):
             launch(terrain_impact, m.body_count, key=self, inputs=[
                 m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
-                m.body_checkpoint_count, dt, self.settings.restitution_threshold,
+                m.body_checkpoint_count, dt, self.gravity, self.settings.restitution_threshold,
                 c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
                 self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                self.solver_v, self.solver_w, *self._impact_scratch(c)], device=self.device)
+                self.solver_v, self.solver_w, self.solver_toi_shift, *self._impact_scratch(c)], device=self.device)
             pairs(MODE_IMPACT)
 
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
@@ -257,11 +259,11 @@ class SoftStepSolver:
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, color, c.color_start, c.color_pairs_sorted,
                     m.body_inv_mass, m.body_friction, m.body_restitution, m.body_rolling_arm, m.body_sphere_radius,
-                    dt, soft, s.max_push_velocity, s.restitution_threshold,
+                    dt, self.gravity, soft, s.max_push_velocity, s.restitution_threshold,
                     c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
                     c.pair_normal_impulse, c.pair_tangent_impulse,
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                    self.solver_v, self.solver_w], device=dev)
+                    self.solver_v, self.solver_w, self.solver_toi_shift], device=dev)
 
         if m.has_restitution:
             self._impacts(m, c, state_in, dt, integrator, fresh_contacts, pairs)
@@ -325,7 +327,8 @@ class SoftStepSolver:
                   c.pair_normal_impulse, c.pair_tangent_impulse,
                   self.solver_v, self.solver_w, self.solver_w0, self.solver_inv_inertia, self.solver_rolling,
                   self.solver_shift_v, self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
-                  self.solver_drift_p, self.solver_drift_r, *self._terrain_rows(m, c), *self._impact_scratch(c),
+                  self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift, *self._terrain_rows(m, c),
+                  *self._impact_scratch(c),
                   state_out.body_pos, state_out.body_quat, state_out.body_rot, state_out.body_vel,
                   state_out.body_angmom, body_bad_step, bad_count]
 

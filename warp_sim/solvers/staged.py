@@ -336,6 +336,7 @@ def integrate_body(
     solver_ref_rot: wp.array(dtype=wp.mat33),
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
     # State out
     body_pos_out: wp.array(dtype=wp.vec3),
     body_quat_out: wp.array(dtype=wp.quat),
@@ -358,11 +359,14 @@ def integrate_body(
     # L changes only by what the contacts did (w - w0): free flight keeps L bit-exact
     angmom = body_angmom_in[i] + world_inertia(rot, body_inertia[i]) * (w - solver_w0[i])
     q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], angmom, h, integrator, rotation)
-    x_new = x + h * v
+    # the impacts' time-of-impact shift (impact.py), spent here: zero unless this substep had one
+    step = h * v + solver_toi_shift[i]
+    solver_toi_shift[i] = wp.vec3(0.0)
+    x_new = x + step
     body_pos_out[i] = x_new
     body_quat_out[i] = q_new
     body_rot_out[i] = rot_new
-    solver_shift_v[i] = h * v
+    solver_shift_v[i] = step
     solver_shift_w[i] = h * w
     solver_drift_p[i] = x_new - solver_ref_pos[i]
     solver_drift_r[i] = drift_rotation(body_shape[i], rot_new, solver_ref_rot[i])
@@ -395,6 +399,7 @@ def integrate_positions(
     solver_ref_rot: wp.array(dtype=wp.mat33),
     solver_drift_p: wp.array(dtype=wp.vec3),
     solver_drift_r: wp.array(dtype=wp.mat33),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
     # State out
     body_pos_out: wp.array(dtype=wp.vec3),
     body_quat_out: wp.array(dtype=wp.quat),
@@ -403,7 +408,7 @@ def integrate_positions(
     integrate_body(wp.tid() + tid_offset, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator,
                    rotation, body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
                    solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r,
-                   body_pos_out, body_quat_out, body_rot_out)
+                   solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
 
 
 
