@@ -12,8 +12,11 @@ phase, warm-start carry and store, the colouring, and the colour launches of the
 sleeping): ``live`` is the pairs found (for a colour launch, the pairs of that colour), a pair
 owns ceil(length / capacity) elements of a pair array (4 points) and 2 of a per-body array.
 Threads past the live count read one counter and are not charged.
-What it leaves out: launches made with ``wp.launch`` directly (one-thread bookkeeping, the
-atomic colouring claims, the radix sorts and scans), neighbour reads in the broad phase beyond
+Launches made with ``wp.launch`` directly because they use atomics (which launch.py must not
+split across CPU threads) are recorded too when they are per-body or per-pair work: the
+mid-step reach check (reach_outrun) and sleeping's pair passes (DIRECT_KERNELS).  What it
+leaves out: the other direct launches (one-thread bookkeeping, the atomic colouring claims, the
+radix sorts and scans), neighbour reads in the broad phase beyond
 one element a thread, and caches: it is a model of the traffic a GPU has to move at least once,
 the floor that ``bench/gpu.py`` divides by the measured time.
 
@@ -40,6 +43,10 @@ PAIR_KERNELS = {"collide_pairs", "carry_pair_impulses", "store_pairs", "color_in
                 "color_bounds", "pair_pass", "pushout_pair", "gather_neighbour_timers"}
 
 
+# per-body or per-pair kernels launched with wp.launch directly (atomics: never split)
+DIRECT_KERNELS = {"reach_outrun", "mark_touched_sleepers", "gather_neighbour_timers"}
+
+
 class ByteCounter:
     """A launch.py checker that runs each launch unchanged and records its arguments."""
 
@@ -54,7 +61,16 @@ class ByteCounter:
         self.kernels: dict[str, dict] = defaultdict(lambda: {"launches": 0, "bytes": 0})
 
     def launch(self, kernel, dim, inputs, device):
-        wp.launch(kernel, dim=dim, inputs=inputs, device=device)
+        self._wp_launch(kernel, dim=dim, inputs=inputs, device=device)
+        self.count(kernel, dim, inputs)
+
+    def direct_launch(self, kernel, dim=None, inputs=None, device=None, **kwargs):
+        self._wp_launch(kernel, dim=dim, inputs=inputs, device=device, **kwargs)
+        if kernel.key in DIRECT_KERNELS:
+            dims = dim if isinstance(dim, int) else math.prod(dim)
+            self.count(kernel, dims, list(inputs or []))
+
+    def count(self, kernel, dim, inputs):
         name = kernel.key
         params = [arg.label for arg in kernel.adj.args]
         args = dict(zip(params, inputs))
@@ -82,11 +98,14 @@ class ByteCounter:
         entry["bytes"] += total
 
     def __enter__(self):
+        self._wp_launch = wp.launch
+        wp.launch = self.direct_launch
         launch_module.set_checker(self)
         return self
 
     def __exit__(self, *exc):
         launch_module.set_checker(None)
+        wp.launch = self._wp_launch
         return False
 
 

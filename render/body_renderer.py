@@ -25,6 +25,9 @@ from warp_sim.types import SHAPE_BOX, SHAPE_SPHERE
 
 from .shader import load_program
 
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
+
 INSTANCE_FLOATS = 16
 
 COLOR_BY_SHAPE = 0

@@ -50,11 +50,14 @@ from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pai
 from .sleep import AwakeModel, Sleep
 from .launch import cpu_threads, launch
 from .model import Model
-from .solvers.solver import SoftStepSolver, SolverSettings
+from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
 from .validation import CONTACT_UPDATES, PAIR_SCHEDULES, SIM_SCHEMA, SOLVERS, STEP_COUNT, check_fields  # noqa: F401
 from .validation import check as check_value
+
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
 
 
 class NonFiniteStateError(RuntimeError):
@@ -172,7 +175,7 @@ class Simulator:
         if self.use_graph and config.broad_phase == "grid_hash" and config.body_contact:
             raise ValueError("broad_phase 'grid_hash' sizes wp.HashGrid on the host and cannot be captured; "
                              "set graph = false or another broad phase, got graph = true")
-        self.solver = SoftStepSolver(config.solver_settings(), config.gravity, self.device, model.body_count)
+        self.solver = make_solver(config.solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
         dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
         # with sleeping on, every kernel sees sleeping bodies as static (sleep.py)
@@ -557,8 +560,8 @@ class Simulator:
             setattr(self.config, key, value)
         self.config.validate()
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
-        self.solver = SoftStepSolver(self.config.solver_settings(), self.config.gravity, self.device,
-                                     self.model.body_count)
+        self.solver = make_solver(self.config.solver_settings(), self.config.gravity, self.device,
+                                  self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
         self.wake_all()
         self.invalidate_graph()

@@ -49,6 +49,9 @@ import warp as wp
 
 from ..launch import LIGHT_CHUNK, launch
 
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
+
 # Pairs per row above which the grids sort a row by heapsort instead of insertion sort.
 INSERTION_SORT_MAX = 32
 # The grid cell is widened by this fraction over 2 r_max + margin so float rounding of the cell

@@ -20,6 +20,9 @@ from .broad_phase import (
     spheres_overlap,
 )
 
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
+
 # The sorted grid's rows are counted and placed in two passes over the neighbour cells; the
 # first keeps up to ROW_STASH pairs a body so the second can copy them (rows are short: 0.7
 # pairs a body in a settled rain of 10k).  The stash costs 8 bytes x ROW_STASH a body.

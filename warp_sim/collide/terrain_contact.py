@@ -49,6 +49,9 @@ from ..integrate import world_inv_inertia
 from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
 from ..types import SHAPE_SPHERE
 
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
+
 NEWTON_ITERATIONS = 6
 CULL_SLACK = 1.0e-3  # [m]
 CULL_SLACK_RATE = 1.0e-7  # [m per m of |x| + |z|]

@@ -44,6 +44,9 @@ from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, wo
 from ..types import SHAPE_SPHERE
 from .impact import impact_terrain
 
+# No kernel here is differentiated: skip generating (and compiling) the adjoints.
+wp.set_module_options({"enable_backward": False})
+
 
 def soft_coefficients(h: float, contact_hertz: float, damping_ratio: float) -> wp.vec3:
     """(biasRate, massScale, impulseScale) for substep h; stiffness capped at a quarter of 1/h."""

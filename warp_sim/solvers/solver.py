@@ -1,8 +1,9 @@
-"""Solver facade: ``step(model, state_in, state_out, contacts, dt)`` advances one substep.
+"""Solvers: ``step(model, state_in, state_out, contacts, dt)`` advances one substep.
 
 A scene without body-body contact runs the fused per-body kernel (soft_step.py): one launch
 per substep.  With body-body contact the same algorithm runs as the staged launches of
-staged.py and pair_solve.py, colour by colour.
+staged.py and pair_solve.py, colour by colour or slab by slab.  ``PushoutSolver`` is the
+thesis's response, its own solver; ``make_solver`` picks the one the settings name.
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ from ..schedule.coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
-from .impact import IMPACT_SWEEPS, impact_begin, terrain_impact
-from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, pair_pass
+from .impact import impact_begin, terrain_impact
+from .pair_solve import MODE_IMPACT, pair_pass
+from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import soft_coefficients, solve_and_integrate
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
@@ -102,10 +104,7 @@ class SoftStepSolver:
         returns the colour sizes to solve with.
         """
         self._rebuild_rows = rebuild_rows
-        if self.settings.solver == "pushout":
-            self._step_pushout(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
-                               color_sizes or [])
-        elif color_sizes is None:
+        if color_sizes is None:
             self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
         else:
             self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
@@ -208,25 +207,24 @@ class SoftStepSolver:
             state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
             body_bad_step, bad_count], device=self.device)
 
-    def _impacts(self, m, c, state_in, dt, integrator, fresh_contacts, pairs):
-        """The impact stage (impact.py): velocities without this substep's gravity, then
-        IMPACT_SWEEPS sweeps of terrain and pair impacts.  A scene without restitution skips it."""
+    def _impact_begin(self, m, state_in, dt, integrator, fresh_contacts):
+        """The impact stage's start (impact.py): the velocities the last solve left, without this
+        substep's gravity.  A scene without restitution runs no impact stage."""
         launch(impact_begin, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, self.gravity, dt, integrator, ROTATIONS[self.settings.rotation],
             int(fresh_contacts), state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
             self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_ref_pos, self.solver_ref_rot,
             self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift], device=self.device)
-        self._impact_sweeps(m, c, dt, pairs)
 
-    def _impact_sweeps(self, m, c, dt, pairs):
-        for _ in range(IMPACT_SWEEPS):
-            launch(terrain_impact, m.body_count, key=self, inputs=[
-                m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
-                m.body_checkpoint_count, dt, self.gravity, self.settings.restitution_threshold,
-                c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
-                self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                self.solver_v, self.solver_w, self.solver_toi_shift, *self._impact_scratch(c)], device=self.device)
-            pairs(MODE_IMPACT)
+    def _impact_sweep(self, m, c, dt, pairs):
+        """One impact sweep: every body's terrain impact, then the pairs' (colour by colour)."""
+        launch(terrain_impact, m.body_count, key=self, inputs=[
+            m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
+            m.body_checkpoint_count, dt, self.gravity, self.settings.restitution_threshold,
+            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
+            self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
+            self.solver_v, self.solver_w, self.solver_toi_shift, *self._impact_scratch(c)], device=self.device)
+        pairs(MODE_IMPACT)
 
     def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
                      fresh_contacts, domains=None, after_impacts=None):
@@ -265,25 +263,38 @@ class SoftStepSolver:
                     self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
                     self.solver_v, self.solver_w, self.solver_toi_shift], device=dev)
 
-        if m.has_restitution:
-            self._impacts(m, c, state_in, dt, integrator, fresh_contacts, pairs)
-            if after_impacts is not None:
-                def impacts_again(sizes):
-                    nonlocal color_sizes
-                    color_sizes = sizes
-                    self._impact_sweeps(m, c, dt, pairs)
+        plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 
-                color_sizes = after_impacts(impacts_again)
-        self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, m.has_restitution)
-        pairs(MODE_WARM_START)
-        for _ in range(s.iterations):
-            terrain(1)
-            pairs(MODE_SOLVE)
-        self._integrate_positions(m, state_in, state_out, dt, integrator)
-        for _ in range(s.relax_iterations):
-            terrain(-1 if m.has_restitution else 0)
-            pairs(MODE_RELAX_CLOSED if m.has_restitution else MODE_RELAX)
-        self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
+        def impact_sweeps():
+            for stage in plan:
+                if stage.kind == IMPACT:
+                    self._impact_sweep(m, c, dt, pairs)
+
+        def impacts_again(sizes):
+            nonlocal color_sizes
+            color_sizes = sizes
+            impact_sweeps()
+
+        for stage in plan:
+            kind = stage.kind
+            if kind == IMPACT_BEGIN:
+                self._impact_begin(m, state_in, dt, integrator, fresh_contacts)
+            elif kind == IMPACT:
+                self._impact_sweep(m, c, dt, pairs)
+            elif kind == AFTER_IMPACTS:
+                if after_impacts is not None:
+                    color_sizes = after_impacts(impacts_again)
+            elif kind == PREPARE:
+                self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, m.has_restitution)
+            elif kind == WARM_START:
+                pairs(stage.mode)
+            elif kind == SOLVE or kind == RELAX:
+                terrain(stage.use_bias)
+                pairs(stage.mode)
+            elif kind == INTEGRATE:
+                self._integrate_positions(m, state_in, state_out, dt, integrator)
+            elif kind == FINALIZE:
+                self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
 
     def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g,
                       after_impacts=None):
@@ -344,30 +355,48 @@ class SoftStepSolver:
         if g.static_bodies:
             launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
-        iterations, relax = s.iterations, s.relax_iterations
-        fuse_finalize = relax > 0
-        # a scene without restitution pays for no impact sweeps (impact.py)
-        for k in range(IMPACT_SWEEPS if impacts else 0):
-            sweep(MODE_IMPACT, k % 2, prepare=int(k == 0))
-        if impacts and after_impacts is not None:
-            def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
-                for k in range(IMPACT_SWEEPS):
-                    sweep(MODE_IMPACT, k % 2)
+        plan = substep_plan(s.iterations, s.relax_iterations, impacts)
+        # the per-body stages ride on the sweeps next to them (module docstring of plan.py)
+        fused_with_solve = s.iterations > 0
+        fused_with_relax = s.relax_iterations > 0
 
-            after_impacts(impacts_again)
-        if iterations == 0:
-            self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, impacts)
-            sweep(MODE_WARM_START, 0)
-            self._integrate_positions(m, state_in, state_out, dt, integrator)
-        for k in range(iterations):
-            sweep(MODE_SOLVE, k % 2, prepare=int(k == 0), integrate=int(k == iterations - 1))
-        for k in range(relax):
-            sweep(MODE_RELAX_CLOSED if impacts else MODE_RELAX, 1, finalize=int(k == relax - 1))
-        if not fuse_finalize:
-            self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
+        def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
+            for again in plan:
+                if again.kind == IMPACT:
+                    sweep(again.mode, again.reverse)
 
-    def _step_pushout(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes):
-        """The thesis's response (pushout.py): one impulse pass, integrate, then position push-out."""
+        for stage in plan:
+            kind = stage.kind
+            if kind == IMPACT:
+                sweep(stage.mode, stage.reverse, prepare=int(stage.first))  # prepare: the impact begin
+            elif kind == AFTER_IMPACTS:
+                if after_impacts is not None:
+                    after_impacts(impacts_again)
+            elif kind == PREPARE and not fused_with_solve:
+                self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, impacts)
+            elif kind == WARM_START and not fused_with_solve:
+                sweep(stage.mode, 0)
+            elif kind == SOLVE:
+                sweep(stage.mode, stage.reverse, prepare=int(stage.first), integrate=int(stage.last))
+            elif kind == INTEGRATE and not fused_with_solve:
+                self._integrate_positions(m, state_in, state_out, dt, integrator)
+            elif kind == RELAX:
+                sweep(stage.mode, stage.reverse, finalize=int(stage.last))
+            elif kind == FINALIZE and not fused_with_relax:
+                self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
+
+
+class PushoutSolver(SoftStepSolver):
+    """The thesis's contact response (SEED.md 3, pushout.py), kept as the baseline the soft step
+    is measured against.  It shares the soft step's per-body stages (prepare, integrate,
+    finalize) and arrays, and replaces the substep."""
+
+    def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
+             fresh_contacts: bool = True, domains=None, rebuild_rows: bool = False, after_impacts=None):
+        """One substep of the thesis's response (pushout.py): one impulse pass, integrate, then
+        position push-out.  Contacts are found every substep and pairs are always coloured, so
+        ``fresh_contacts``, ``domains``, ``rebuild_rows`` and ``after_impacts`` do not apply."""
+        color_sizes = color_sizes or []
         s = self.settings
         m, c = model, contacts
         n = m.body_count
@@ -403,3 +432,9 @@ class SoftStepSolver:
             self.solver_v, self.solver_w, self.solver_w0,
             state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
             body_bad_step, bad_count], device=dev)
+
+
+def make_solver(settings: SolverSettings, gravity, device, body_count: int = 0) -> SoftStepSolver:
+    """The solver ``settings.solver`` names: "soft_step" (default) or "pushout" (the baseline)."""
+    kind = {"soft_step": SoftStepSolver, "pushout": PushoutSolver}[settings.solver]
+    return kind(settings, gravity, device, body_count)

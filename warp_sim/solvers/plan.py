@@ -1,0 +1,67 @@
+"""The soft step's substep, written once: the stage sequence every pair schedule runs.
+
+After Box2D v3's solver stages (one list, consumed by each scheduler).  One substep is
+
+    [impact begin, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with restitution
+    prepare, warm start
+    `iterations` solve sweeps (soft bias)
+    integrate
+    `relax_iterations` relax sweeps (no bias; closed contacts only with restitution)
+    finalize
+
+solver.py runs it colour by colour (the GPU schedule: one launch per stage, a sweep being the
+terrain launch then one launch per colour) and slab by slab (the CPU schedule, solvers/domains.py,
+which rides the per-body stages on the sweeps next to them: the impact begin on the first impact
+sweep, prepare and warm start on the first solve sweep, integrate on the last solve sweep,
+finalize on the last relax sweep).  ``reverse`` is the walk order of a sweep where the schedule
+has one (slabs: symmetric Gauss-Seidel, see SoftStepSolver._step_domains); colours have none.
+The terrain-only fused kernel (soft_step.py) is the same sequence for one body, unrolled in one
+kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .impact import IMPACT_SWEEPS
+from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START
+
+IMPACT_BEGIN, IMPACT, AFTER_IMPACTS, PREPARE, WARM_START, SOLVE, INTEGRATE, RELAX, FINALIZE = range(9)
+SWEEPS = (IMPACT, SOLVE, RELAX)
+
+
+@dataclass(frozen=True)
+class Stage:
+    kind: int
+    index: int = 0  # which sweep of its kind this is
+    count: int = 1  # how many sweeps of its kind the substep runs
+    mode: int = MODE_WARM_START  # the pair_solve mode of a sweep (or of the warm start)
+    use_bias: int = 0  # terrain rows: 1 soft bias, 0 none, -1 no bias and closed contacts only
+    reverse: int = 0
+
+    @property
+    def first(self) -> bool:
+        return self.index == 0
+
+    @property
+    def last(self) -> bool:
+        return self.index == self.count - 1
+
+
+def substep_plan(iterations: int, relax_iterations: int, impacts: bool) -> tuple[Stage, ...]:
+    """The stages of one substep.  ``impacts``: the scene has restitution (model.has_restitution);
+    a scene without runs no impact stage, and its relax sweeps close open gaps too."""
+    plan = []
+    if impacts:
+        plan.append(Stage(IMPACT_BEGIN))
+        plan += [Stage(IMPACT, k, IMPACT_SWEEPS, MODE_IMPACT, reverse=k % 2) for k in range(IMPACT_SWEEPS)]
+        plan.append(Stage(AFTER_IMPACTS))
+    plan += [Stage(PREPARE), Stage(WARM_START)]
+    plan += [Stage(SOLVE, k, iterations, MODE_SOLVE, use_bias=1, reverse=k % 2) for k in range(iterations)]
+    plan.append(Stage(INTEGRATE))
+    # relax: open gaps of a scene with restitution are left to the next substep's impact stage
+    relax_mode, relax_bias = (MODE_RELAX_CLOSED, -1) if impacts else (MODE_RELAX, 0)
+    plan += [Stage(RELAX, k, relax_iterations, relax_mode, use_bias=relax_bias, reverse=1)
+             for k in range(relax_iterations)]
+    plan.append(Stage(FINALIZE))
+    return tuple(plan)
