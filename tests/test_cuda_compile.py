@@ -15,16 +15,9 @@ import multiprocessing
 import os
 from pathlib import Path
 
+from bench.registers import kernel_modules
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def kernel_modules() -> list[str]:
-    names = []
-    for package in ("warp_sim", "render"):
-        for path in sorted((ROOT / package).rglob("*.py")):
-            if "@wp.kernel" in path.read_text():
-                names.append(".".join(path.relative_to(ROOT).with_suffix("").parts))
-    return names
 
 
 def compile_module(name: str) -> tuple[str, str, list[str]]:
