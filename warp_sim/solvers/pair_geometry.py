@@ -22,9 +22,10 @@ turned with the bodies as well, (I + D) r - moved / 2, keep it too, but let a 10
 top-down drift 12.9 mm sideways in 9 s instead of under 1 cm.)
 
 Two spheres need no stored geometry at all: their normal is the line of their current centres,
-n = (c_i - c_j) / |c_i - c_j|, the gap |c_i - c_j| - (R_i + R_j), and the arms -R_i n, +R_j n lie
-on that line, so a frictionless impulse turns neither ball (midpoint arms would: they leave the
-line when the balls slide past each other).
+n = (c_i - c_j) / |c_i - c_j|, the gap s = |c_i - c_j| - (R_i + R_j), and the arms
+-(R_i + s / 2) n, +(R_j + s / 2) n end at one point of that line, midway between the surfaces,
+so a frictionless impulse turns neither ball (midpoint arms of the stored anchors would: they
+leave the line when the balls slide past each other).
 """
 
 import warp as wp
@@ -63,10 +64,15 @@ def pair_point_now(
         n = n_ref
         if dist > 1.0e-9:
             n = d / dist
+        gap = dist - (sphere_radius_i + sphere_radius_j)
         out.normal = n
-        out.separation = dist - (sphere_radius_i + sphere_radius_j)
-        out.arm_i = -sphere_radius_i * n
-        out.arm_j = sphere_radius_j * n
+        out.separation = gap
+        # both arms end at the midpoint between the two surfaces: x_i + r_i = x_j + r_j exactly
+        # whatever the gap, so a friction impulse keeps angular momentum too (arms -R_i n and
+        # +R_j n end a gap apart, and a tangential impulse there turned L by gap x P_t: 3e-3 of it
+        # over a glancing hit with mu 0.5)
+        out.arm_i = -(sphere_radius_i + 0.5 * gap) * n
+        out.arm_j = (sphere_radius_j + 0.5 * gap) * n
         return out
     ri = point - x_ref_i
     rj = point - x_ref_j
