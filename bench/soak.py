@@ -61,6 +61,18 @@ velocity = [2.0, 0.0, 0.0]
 """
 
 
+def source_commit() -> str | None:
+    """The checkout's commit (``git rev-parse``), or None outside a git checkout."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).resolve().parent,
+                             capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
 def rss_bytes() -> int:
     with open("/proc/self/statm", encoding="ascii") as f:
         return int(f.read().split()[1]) * 4096  # resident pages (4 KiB pages on Linux x86-64)
@@ -138,6 +150,7 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - started
     result = {
         "machine": machine_info("cpu"),
+        "commit": source_commit(),
         "steps": done,
         "requested_steps": args.steps,
         "bodies": sim.model.body_count,
