@@ -71,8 +71,12 @@ def pair_point_now(
         # whatever the gap, so a friction impulse keeps angular momentum too (arms -R_i n and
         # +R_j n end a gap apart, and a tangential impulse there turned L by gap x P_t: 3e-3 of it
         # over a glancing hit with mu 0.5)
-        out.arm_i = -(sphere_radius_i + 0.5 * gap) * n
-        out.arm_j = (sphere_radius_j + 0.5 * gap) * n
+        # (A gap beyond the two diameters keeps the surface arms: no impulse acts there at sane
+        # speeds, and an arm of half an overflowing gap turned a runaway body's neighbour
+        # non-finite through 0 x inf in the friction mass.)
+        half_gap = wp.where(wp.abs(gap) <= sphere_radius_i + sphere_radius_j, 0.5 * gap, 0.0)
+        out.arm_i = -(sphere_radius_i + half_gap) * n
+        out.arm_j = (sphere_radius_j + half_gap) * n
         return out
     ri = point - x_ref_i
     rj = point - x_ref_j
