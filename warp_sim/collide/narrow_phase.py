@@ -67,6 +67,25 @@ def collide_pairs(
 
 
 @wp.func
+def swept_radius(r: float, speed: float, spin: float, sweep_time: float, gravity_magnitude: float,
+                 inv_mass: float) -> float:
+    """Bounding radius r grown by how far a surface point can move in ``sweep_time``:
+    T (|v| + |w| r) + T^2 |g| for a dynamic body (``spin`` = |w| r).  The gravity term bounds what
+    the substeps' kicks add: n substeps of h = T / n move a body g h^2 n (n + 1) / 2 <= g T^2
+    further than |v| T (without it a sphere falling at g = 100, dt = 1/30 sank 16.7 cm into a box)."""
+    fall = float(0.0)
+    if inv_mass > 0.0:
+        fall = sweep_time * sweep_time * gravity_magnitude
+    return r + sweep_time * (speed + spin) + fall
+
+
+@wp.func
+def body_omega(i: int, body_inv_inertia: wp.array(dtype=wp.vec3), body_rot: wp.array(dtype=wp.mat33),
+               body_angmom: wp.array(dtype=wp.vec3)) -> wp.vec3:
+    return wp.cw_mul(body_inv_inertia[i], wp.transpose(body_rot[i]) * body_angmom[i])
+
+
+@wp.func
 def reach_needed(
     i: int,
     body_bound_radius: wp.array(dtype=float),
@@ -78,17 +97,11 @@ def reach_needed(
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
 ) -> float:
-    """Bounding radius grown by how far a surface point can move in ``sweep_time``:
-    T (|v| + |w| r) + T^2 |g| for a dynamic body.  The gravity term bounds what the substeps'
-    kicks add: n substeps of h = T / n move a body g h^2 n (n + 1) / 2 <= g T^2 further than
-    |v| T (without it a sphere falling at g = 100, dt = 1/30 sank 16.7 cm into a box)."""
+    """swept_radius of body i with the state's velocities."""
     r = body_bound_radius[i]
-    local_angmom = wp.transpose(body_rot[i]) * body_angmom[i]
-    omega = wp.cw_mul(body_inv_inertia[i], local_angmom)
-    fall = float(0.0)
-    if body_inv_mass[i] > 0.0:
-        fall = sweep_time * sweep_time * gravity_magnitude
-    return r + sweep_time * (wp.length(body_vel[i]) + wp.length(omega) * r) + fall
+    omega = body_omega(i, body_inv_inertia, body_rot, body_angmom)
+    return swept_radius(r, wp.length(body_vel[i]), wp.length(omega) * r, sweep_time, gravity_magnitude,
+                        body_inv_mass[i])
 
 
 @wp.kernel
@@ -143,15 +156,13 @@ def reach_needed_now(
     which bounding spheres can meet."""
     r = body_bound_radius[i]
     v = body_vel[i]
-    omega = wp.cw_mul(body_inv_inertia[i], wp.transpose(body_rot[i]) * body_angmom[i])
+    omega = body_omega(i, body_inv_inertia, body_rot, body_angmom)
     if use_solver_velocity != 0:
         v = solver_v[i]
         omega = solver_w[i]
-    fall = float(0.0)
-    if body_inv_mass[i] > 0.0:
-        fall = remaining_time * remaining_time * gravity_magnitude
     spin = wp.where(with_spin != 0, wp.length(omega) * r, 0.0)
-    return r + remaining_time * (wp.length(v) + spin) + fall + wp.length(body_pos[i] - solver_ref_pos[i])
+    return swept_radius(r, wp.length(v), spin, remaining_time, gravity_magnitude, body_inv_mass[i]) + wp.length(
+        body_pos[i] - solver_ref_pos[i])
 
 
 @wp.kernel
