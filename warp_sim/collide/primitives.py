@@ -483,6 +483,50 @@ def box_edge_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: i
 
 
 @wp.func
+def edge_face_manifold(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, rot_b: wp.mat33, half_b: wp.vec3,
+                       normal: wp.vec3, depth: float, origin: wp.vec3, margin: float) -> Manifold:
+    """The faces of both boxes that support an edge-axis contact, clipped against each other.
+
+    The separating axis is an edge cross product, but a tilted plate lying across another meets
+    it along a strip, not at one point: a single point between the two edges lets the plate
+    turn about it, and its far side swings into the other box within a substep.  So (as Jolt's
+    face-to-face manifold does) the face of either box best aligned with the edge normal is the
+    reference, the other box's incident face is clipped to it (box_face_contact), and the points
+    keep the edge normal.  A point a height z off the reference face (unit normal n_f) is
+    -z / |n . n_f| deep along the edge normal n; no point may be deeper than the axis overlap
+    itself, which is the exact penetration along n.  The caller keeps the single edge point
+    when fewer than two points survive (crossing edges touch at a point)."""
+    axis_a = int(0)
+    axis_b = int(0)
+    best_a = float(-1.0)
+    best_b = float(-1.0)
+    for k in range(3):
+        ca = wp.abs(wp.dot(mat_column(rot_a, k), normal))
+        cb = wp.abs(wp.dot(mat_column(rot_b, k), normal))
+        if ca > best_a:
+            best_a = ca
+            axis_a = k
+        if cb > best_b:
+            best_b = cb
+            axis_b = k
+    m = manifold_empty()
+    cosine = best_a
+    if best_a >= best_b:
+        # A's face towards B: its outward normal opposes n (n points from B into A)
+        outward = -sign_of(wp.dot(mat_column(rot_a, axis_a), normal)) * mat_column(rot_a, axis_a)
+        m = box_face_contact(pos_a, rot_a, half_a, axis_a, outward, wp.vec3(0.0), rot_b, half_b, 0, normal,
+                             origin, margin)
+    else:
+        cosine = best_b
+        outward = sign_of(wp.dot(mat_column(rot_b, axis_b), normal)) * mat_column(rot_b, axis_b)
+        m = box_face_contact(wp.vec3(0.0), rot_b, half_b, axis_b, outward, pos_a, rot_a, half_a, 1, normal,
+                             origin, margin)
+    for n in range(m.count):
+        m.depth[n] = wp.min(m.depth[n] / cosine, depth)
+    return m
+
+
+@wp.func
 def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.vec3, rot_b: wp.mat33,
                     half_b: wp.vec3, margin: float) -> Manifold:
     """Box A against box B by the separating-axis test, then a face or an edge manifold.
@@ -542,6 +586,9 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.
     tolerance = EDGE_PREFERENCE_ABSOLUTE * size + EDGE_PREFERENCE_RELATIVE * wp.abs(face_separation)
     if edge_separation > face_separation + tolerance:
         normal = sign_of(wp.dot(delta, edge_axis)) * edge_axis
+        faces = edge_face_manifold(delta, rot_a, half_a, rot_b, half_b, normal, -edge_separation, pos_b, margin)
+        if faces.count >= 2:
+            return faces
         return box_edge_contact(delta, rot_a, half_a, edge_a, rot_b, half_b, edge_b, normal, -edge_separation,
                                 pos_b)
     normal = sign_of(wp.dot(delta, face_axis)) * face_axis
