@@ -376,6 +376,20 @@ def clip_source_features(source: int, inc_axis: int, inc_side: float, ref_axis: 
 
 
 @wp.func
+def most_aligned_axis(rot: wp.mat33, direction: wp.vec3) -> int:
+    """The box axis (column of ``rot``) most nearly parallel or antiparallel to ``direction``;
+    the first of a tie."""
+    axis = int(0)
+    best = float(-1.0)
+    for k in range(3):
+        c = wp.abs(wp.dot(mat_column(rot, k), direction))
+        if c > best:
+            best = c
+            axis = k
+    return axis
+
+
+@wp.func
 def box_face_contact(ref_pos: wp.vec3, ref_rot: wp.mat33, ref_half: wp.vec3, ref_axis: int,
                      ref_outward: wp.vec3, inc_pos: wp.vec3, inc_rot: wp.mat33, inc_half: wp.vec3,
                      ref_is_b: int, normal: wp.vec3, origin: wp.vec3, margin: float) -> Manifold:
@@ -394,12 +408,7 @@ def box_face_contact(ref_pos: wp.vec3, ref_rot: wp.mat33, ref_half: wp.vec3, ref
     face_centre = ref_pos + ref_half[ref_axis] * ref_outward
     frame = wp.matrix_from_rows(t1, t2, ref_outward)
 
-    inc_axis = int(0)
-    best = float(-1.0)
-    for j in range(3):
-        if wp.abs(wp.dot(mat_column(inc_rot, j), ref_outward)) > best:
-            best = wp.abs(wp.dot(mat_column(inc_rot, j), ref_outward))
-            inc_axis = j
+    inc_axis = most_aligned_axis(inc_rot, ref_outward)
     inc_side = -sign_of(wp.dot(mat_column(inc_rot, inc_axis), ref_outward))
     poly = ClipPolygon()
     poly.count = 0
@@ -496,31 +505,26 @@ def edge_face_manifold(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, rot_b: 
     -z / |n . n_f| deep along the edge normal n; no point may be deeper than the axis overlap
     itself, which is the exact penetration along n.  The caller keeps the single edge point
     when fewer than two points survive (crossing edges touch at a point)."""
-    axis_a = int(0)
-    axis_b = int(0)
-    best_a = float(-1.0)
-    best_b = float(-1.0)
-    for k in range(3):
-        ca = wp.abs(wp.dot(mat_column(rot_a, k), normal))
-        cb = wp.abs(wp.dot(mat_column(rot_b, k), normal))
-        if ca > best_a:
-            best_a = ca
-            axis_a = k
-        if cb > best_b:
-            best_b = cb
-            axis_b = k
-    m = manifold_empty()
-    cosine = best_a
-    if best_a >= best_b:
-        # A's face towards B: its outward normal opposes n (n points from B into A)
-        outward = -sign_of(wp.dot(mat_column(rot_a, axis_a), normal)) * mat_column(rot_a, axis_a)
-        m = box_face_contact(pos_a, rot_a, half_a, axis_a, outward, wp.vec3(0.0), rot_b, half_b, 0, normal,
-                             origin, margin)
-    else:
-        cosine = best_b
-        outward = sign_of(wp.dot(mat_column(rot_b, axis_b), normal)) * mat_column(rot_b, axis_b)
-        m = box_face_contact(wp.vec3(0.0), rot_b, half_b, axis_b, outward, pos_a, rot_a, half_a, 1, normal,
-                             origin, margin)
+    face_a = mat_column(rot_a, most_aligned_axis(rot_a, normal))
+    face_b = mat_column(rot_b, most_aligned_axis(rot_b, normal))
+    cosine_a = wp.abs(wp.dot(face_a, normal))
+    cosine_b = wp.abs(wp.dot(face_b, normal))
+    ref_is_b = int(0)
+    if cosine_a < cosine_b:
+        ref_is_b = 1
+    # B lies at the origin; n points from B into A, so A's face towards B is the one against n
+    ref_pos = wp.where(ref_is_b == 1, wp.vec3(0.0), pos_a)
+    ref_rot = wp.where(ref_is_b == 1, rot_b, rot_a)
+    ref_half = wp.where(ref_is_b == 1, half_b, half_a)
+    inc_pos = wp.where(ref_is_b == 1, pos_a, wp.vec3(0.0))
+    inc_rot = wp.where(ref_is_b == 1, rot_a, rot_b)
+    inc_half = wp.where(ref_is_b == 1, half_a, half_b)
+    toward_other = wp.where(ref_is_b == 1, normal, -normal)
+    ref_axis = most_aligned_axis(ref_rot, normal)
+    outward = sign_of(wp.dot(mat_column(ref_rot, ref_axis), toward_other)) * mat_column(ref_rot, ref_axis)
+    cosine = wp.max(cosine_a, cosine_b)
+    m = box_face_contact(ref_pos, ref_rot, ref_half, ref_axis, outward, inc_pos, inc_rot, inc_half, ref_is_b,
+                         normal, origin, margin)
     for n in range(m.count):
         m.depth[n] = wp.min(m.depth[n] / cosine, depth)
     return m
