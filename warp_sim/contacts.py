@@ -88,6 +88,8 @@ class Contacts:
         self.prev_pair_body = wp.zeros(m, dtype=wp.vec2i, device=device)
         self.prev_pair_point_count = wp.zeros(m, dtype=wp.int32, device=device)
         self.prev_pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
+        self.prev_pair_normal = wp.zeros(m, dtype=wp.vec3, device=device)
+        self.prev_pair_point = wp.zeros(k, dtype=wp.vec3, device=device)
         self.prev_pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
         self.prev_pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
         # graph colouring of the pairs (schedule/coloring.py): colour c holds
@@ -98,10 +100,11 @@ class Contacts:
     def grow_pairs(self, pair_max: int):
         """Room for ``pair_max`` pairs; last pass's pairs (the warm-start source) move over."""
         keep = [self.prev_pair_count, self.prev_pair_body, self.prev_pair_point_count, self.prev_pair_feature,
-                self.prev_pair_normal_impulse, self.prev_pair_tangent_impulse]
+                self.prev_pair_normal, self.prev_pair_point, self.prev_pair_normal_impulse, self.prev_pair_tangent_impulse]
         self._alloc_pairs(pair_max)
         for dst, src in zip([self.prev_pair_count, self.prev_pair_body, self.prev_pair_point_count,
-                             self.prev_pair_feature, self.prev_pair_normal_impulse, self.prev_pair_tangent_impulse],
+                             self.prev_pair_feature, self.prev_pair_normal, self.prev_pair_point, self.prev_pair_normal_impulse,
+                             self.prev_pair_tangent_impulse],
                             keep):
             wp.copy(dst, src, count=min(dst.size, src.size))
 

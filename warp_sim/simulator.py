@@ -522,7 +522,7 @@ class Simulator:
             arrays += [self.sleep.body_sleep_timer, self.sleep.body_inv_mass_awake]
         if self.pairs is not None:
             arrays += [c.prev_pair_count, c.prev_pair_body, c.prev_pair_point_count, c.prev_pair_feature,
-                       c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]
+                       c.prev_pair_normal, c.prev_pair_point, c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]
         return arrays
 
     def restore(self, snap: dict):

@@ -262,40 +262,95 @@ def find_pair(pairs: wp.array(dtype=wp.vec2i), count: int, key: wp.vec2i) -> int
     return -1
 
 
+# cos 5 degrees: how far a pair's normal may turn between passes for its points to be matched by place
+SAME_FACE_COS = wp.constant(0.9962)
+
+
+@wp.func
+def closest_unclaimed(point: wp.vec3, q: int, old_count: int, claimed: int, prev_pair_point: wp.array(dtype=wp.vec3)) -> int:
+    """Last pass's point of pair q nearest to ``point`` that no other new point has taken, if it
+    lies within half the smallest spacing of last pass's points (so it is the only candidate), else -1."""
+    spacing = float(1.0e30)
+    for a in range(old_count):
+        for b in range(a + 1, old_count):
+            spacing = wp.min(spacing, wp.length(prev_pair_point[q * POINTS + a] - prev_pair_point[q * POINTS + b]))
+    best = int(-1)
+    best_distance = 0.5 * spacing
+    for kk in range(old_count):
+        if (claimed & (1 << kk)) == 0:
+            distance = wp.length(point - prev_pair_point[q * POINTS + kk])
+            if distance < best_distance:
+                best = kk
+                best_distance = distance
+    return best
+
+
 @wp.kernel
 def carry_pair_impulses(
     tid_offset: int,
-    # Contacts in (last substep)
+    # Contacts in (last pass)
     prev_pair_count: wp.array(dtype=wp.int32),
     prev_pair_body: wp.array(dtype=wp.vec2i),
     prev_pair_point_count: wp.array(dtype=wp.int32),
     prev_pair_feature: wp.array(dtype=wp.int32),
+    prev_pair_normal: wp.array(dtype=wp.vec3),
+    prev_pair_point: wp.array(dtype=wp.vec3),
     prev_pair_normal_impulse: wp.array(dtype=float),
     prev_pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    # Contacts in (this substep)
+    # Contacts in (this pass)
     pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
     pair_feature: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
     # Out
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
 ):
+    """Each new point takes the impulses of last pass's point with its feature id; a point whose
+    feature is new takes those of the nearest unclaimed old point (``closest_unclaimed``), if the
+    pair's normal has turned by less than SAME_FACE_COS (the same faces still meet: a load carried
+    along a normal that turned further would push the wrong way).
+
+    Why the fallback: two equal boxes resting face on face have their incident corners exactly on
+    the reference face's side planes, so a rounding-level turn decides whether a point is a corner
+    (one id) or a clipped edge crossing (another id) of the same place.  In a 10-cube column about
+    3 % of the pair passes changed ids that way; each change dropped a loaded point's impulse to
+    zero, and the stack jolted and drifted sideways."""
     p = wp.tid() + tid_offset
     if p >= pair_count[0]:
         return
     q = find_pair(prev_pair_body, prev_pair_count[0], pair_body[p])
+    count = pair_point_count[p]
+    old_count = int(0)
+    if q >= 0:
+        old_count = prev_pair_point_count[q]
+    claimed = int(0)
+    source = wp.vec4i(-1, -1, -1, -1)
+    for k in range(count):
+        feature = pair_feature[p * POINTS + k]
+        for kk in range(old_count):
+            if prev_pair_feature[q * POINTS + kk] == feature and (claimed & (1 << kk)) == 0:
+                source[k] = kk
+                claimed = claimed | (1 << kk)
+    same_face = int(0)
+    if q >= 0:
+        same_face = wp.where(wp.dot(pair_normal[p], prev_pair_normal[q]) > SAME_FACE_COS, 1, 0)
+    for k in range(count):
+        if source[k] < 0 and old_count > 1 and same_face != 0:
+            kk = closest_unclaimed(pair_point[p * POINTS + k], q, old_count, claimed, prev_pair_point)
+            if kk >= 0:
+                source[k] = kk
+                claimed = claimed | (1 << kk)
     for k in range(POINTS):
         slot = p * POINTS + k
         normal_impulse = float(0.0)
         tangent_impulse = wp.vec3(0.0)
-        if q >= 0 and k < pair_point_count[p]:
-            feature = pair_feature[slot]
-            for kk in range(prev_pair_point_count[q]):
-                old = q * POINTS + kk
-                if prev_pair_feature[old] == feature:
-                    normal_impulse = prev_pair_normal_impulse[old]
-                    tangent_impulse = prev_pair_tangent_impulse[old]
+        if k < count and source[k] >= 0:
+            old = q * POINTS + source[k]
+            normal_impulse = prev_pair_normal_impulse[old]
+            tangent_impulse = prev_pair_tangent_impulse[old]
         pair_normal_impulse[slot] = normal_impulse
         pair_tangent_impulse[slot] = tangent_impulse
 
@@ -308,6 +363,8 @@ def store_pairs(
     pair_body: wp.array(dtype=wp.vec2i),
     pair_point_count: wp.array(dtype=wp.int32),
     pair_feature: wp.array(dtype=wp.int32),
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     # Out
@@ -315,6 +372,8 @@ def store_pairs(
     prev_pair_body: wp.array(dtype=wp.vec2i),
     prev_pair_point_count: wp.array(dtype=wp.int32),
     prev_pair_feature: wp.array(dtype=wp.int32),
+    prev_pair_normal: wp.array(dtype=wp.vec3),
+    prev_pair_point: wp.array(dtype=wp.vec3),
     prev_pair_normal_impulse: wp.array(dtype=float),
     prev_pair_tangent_impulse: wp.array(dtype=wp.vec3),
 ):
@@ -326,8 +385,10 @@ def store_pairs(
         return
     prev_pair_body[p] = pair_body[p]
     prev_pair_point_count[p] = pair_point_count[p]
+    prev_pair_normal[p] = pair_normal[p]
     for k in range(POINTS):
         slot = p * POINTS + k
         prev_pair_feature[slot] = pair_feature[slot]
+        prev_pair_point[slot] = pair_point[slot]
         prev_pair_normal_impulse[slot] = pair_normal_impulse[slot]
         prev_pair_tangent_impulse[slot] = pair_tangent_impulse[slot]

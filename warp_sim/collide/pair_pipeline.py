@@ -106,9 +106,10 @@ class PairContactPipeline:
             contacts.pair_depth, contacts.pair_feature], device=self.device)
         launch(carry_pair_impulses, self.live_dim, key=self, inputs=[
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
-            contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
+            contacts.prev_pair_feature, contacts.prev_pair_normal, contacts.prev_pair_point,
+            contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
-            contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
+            contacts.pair_normal, contacts.pair_point, contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
         if self.colors:
             self.coloring.run(m.body_inv_mass, contacts, None if self.capturable else self.live_dim)
         if self.domain_count > 0:
@@ -155,9 +156,10 @@ class PairContactPipeline:
         """Keep this substep's pairs and impulses as the next substep's warm-start source."""
         launch(store_pairs, self.live_dim, key=self, inputs=[
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
-            contacts.pair_normal_impulse, contacts.pair_tangent_impulse,
+            contacts.pair_normal, contacts.pair_point, contacts.pair_normal_impulse, contacts.pair_tangent_impulse,
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
-            contacts.prev_pair_feature, contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse],
+            contacts.prev_pair_feature, contacts.prev_pair_normal, contacts.prev_pair_point,
+            contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse],
             device=self.device)
 
 
