@@ -13,6 +13,7 @@ import numpy as np
 
 from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig, Simulator
 from warp_sim.builder import Material
+from warp_sim.column_sag import contact_omega as contact_omega_of
 
 G = 9.81
 ZERO_G = (0.0, 0.0, 0.0)
@@ -42,8 +43,8 @@ def simulate(builder: ModelBuilder, **config) -> Simulator:
 
 
 def contact_omega(h: float) -> float:
-    """Soft contact angular frequency 2 pi min(contact_hertz, 1 / (4 h)) (README: contact stiffness)."""
-    return 2.0 * math.pi * min(SimConfig().contact_hertz, 0.25 / h)
+    """Soft contact angular frequency at substep h (README: contact stiffness; column_sag.py)."""
+    return contact_omega_of(h, SimConfig().contact_hertz)
 
 
 def host(sim: Simulator, name: str) -> np.ndarray:
@@ -347,7 +348,7 @@ def impact_properties(quick: bool) -> list[dict]:
             if k % 3 == 0:
                 depth = max(depth, pair_depth(sim))
         tag = f"seed {seed}, 12 bodies, {steps} steps"
-        n_sub = steps * sim.config.substeps
+        n_sub = steps * sim.substeps
         # every contact impulse acts equal and opposite: momentum is exact but for float32
         # round-off, a few eps of each body's |p| per substep, summed: 4 eps sum m|v| per substep
         tol_p = 4 * n_sub * eps32
@@ -381,7 +382,7 @@ def glancing_spheres(quick: bool) -> list[dict]:
         sim = simulate(b, gravity=ZERO_G, sleep=False, contact_update=update)
         l0, ke0 = angular_momentum(sim), sim.kinetic_energy()
         sim.step(60)
-        n_sub = 60 * sim.config.substeps
+        n_sub = 60 * sim.substeps
         tag = f"glancing spheres, contacts once per {update}"
         # as property_angular_momentum: exact but for float32, 4 eps per substep of |L|
         rows.append(check("property_angular_momentum", 0, tag, "|L - L0| / |L0| = 0", 0.0,

@@ -287,7 +287,7 @@ def prepare_slope(case: str, integrator: str, dt: float) -> Prepared:
     def finish(timing):
         err = abs(slope_acceleration(sim, angle, steps * dt) / exact - 1.0)
         return {"case": case, "method": integrator, "integrator": integrator, "rotation": "quaternion", "dt": dt,
-                "substeps": sim.config.substeps, **cost_columns(timing, steps, dt, sim.config.substeps),
+                "substeps": sim.substeps, **cost_columns(timing, steps, dt, sim.substeps),
                 "error": err if timing["status"] == "ok" else None, "error_kind": kind, "status": timing["status"]}
 
     return Prepared(sim, [steps], finish)
@@ -322,7 +322,7 @@ def prepare_bounce(integrator: str, dt: float) -> Prepared:
             apex = parabola_apex(np.array(heights, dtype=np.float64))
             err = abs(apex / (BOUNCE_E**2 * drop) - 1.0)
         return {"case": "bounce", "method": integrator, "integrator": integrator, "rotation": "quaternion", "dt": dt,
-                "substeps": sim.config.substeps, **cost_columns(timing, steps, dt, sim.config.substeps),
+                "substeps": sim.substeps, **cost_columns(timing, steps, dt, sim.substeps),
                 "error": err, "error_kind": f"|apex / (e^2 H) - 1|, e = {BOUNCE_E}", "status": timing["status"]}
 
     return Prepared(sim, [steps], finish)

@@ -14,8 +14,9 @@ G = cases.GRAVITY
 
 
 def omega(h: float) -> float:
-    """Soft contact angular frequency 2 pi min(contact_hertz, 1 / (4 h))."""
-    return 2.0 * math.pi * min(SimConfig().contact_hertz, 0.25 / h)
+    """Soft contact angular frequency 2 pi / (4 h) (contact_hertz unset: a quarter of the substep rate)."""
+    assert SimConfig().contact_hertz is None
+    return 2.0 * math.pi * 0.25 / h
 
 
 def stack(count: int, top_down: bool = False, **config) -> Simulator:

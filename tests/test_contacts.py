@@ -13,9 +13,9 @@ from warp_sim.builder import Material
 G = cases.GRAVITY
 
 
-def contact_omega(h: float, hertz: float = SimConfig().contact_hertz) -> float:
-    """Angular frequency of the soft contact spring: 2 pi min(contact_hertz, 1 / (4 h))."""
-    return 2.0 * math.pi * min(hertz, 0.25 / h)
+def contact_omega(h: float, hertz: float | None = SimConfig().contact_hertz) -> float:
+    """Angular frequency of the soft contact spring: 2 pi / (4 h), or 2 pi contact_hertz if lower."""
+    return 2.0 * math.pi * (0.25 / h if hertz is None else min(hertz, 0.25 / h))
 
 
 @pytest.mark.parametrize("restitution", [0.5, 0.8])

@@ -166,6 +166,8 @@ def run_command(args) -> int:
     check_frames_on_disk(frames, scene.body_count, out.parent, f"--out '{out}'")
 
     sim = scene.build(device)
+    if not args.quiet and (sim.substeps != scene.config.substeps or sim.substep_plan.sag > sim.substep_plan.budget):
+        print(f"{source}: {sim.substep_plan.describe()}", file=sys.stderr)
     if resume_info is not None:
         try:
             restore_checkpoint(sim, resume_info, resume_arrays)
@@ -191,7 +193,7 @@ def run_command(args) -> int:
         result = run(sim, total - start, record_every=record_every, progress=not args.quiet, writer=writer,
                      checkpoint_every=args.checkpoint_every, on_checkpoint=on_checkpoint,
                      summary_extra={"scene": scene.name, "device": device, "dt": sim.config.dt,
-                                    "substeps": sim.config.substeps, "integrator": sim.config.integrator})
+                                    "substeps": sim.substeps, "integrator": sim.config.integrator})
     except NonFiniteStateError as e:
         raise CommandError(f"{source}: {e}; body {e.body} is {scene.body_origin(e.body)} "
                            f"(frames up to the last good one are in '{out}')") from None

@@ -1,6 +1,9 @@
 """Simulator: owns the model, two states, contacts and the solver; runs whole steps.
 
-One step of ``dt`` is ``substeps`` substeps of h = dt / substeps.  With ``contact_update =
+One step of ``dt`` is ``substeps`` substeps of h = dt / substeps; ``substeps`` is the fewest, and
+with ``auto_substeps`` (the default) the simulator runs more where the columns the scene starts
+with would sag past ``column_sag`` under their soft contacts (column_sag.py; ``Simulator.substeps``
+and ``substep_plan`` say what runs and why).  With ``contact_update =
 "substep"`` each substep is
 
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
@@ -53,6 +56,7 @@ from .model import Model
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
+from .column_sag import plan_substeps
 from .validation import CONTACT_UPDATES, PAIR_SCHEDULES, SIM_SCHEMA, SOLVERS, STEP_COUNT, check_fields  # noqa: F401
 from .validation import check as check_value
 
@@ -72,7 +76,7 @@ class SimConfig:
     """Simulation settings, the ``[sim]`` table of a scene file (units SI)."""
 
     dt: float = 1.0 / 60.0
-    substeps: int = 4
+    substeps: int = 4  # the fewest: auto_substeps may run more (column_sag.py)
     gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
     duration: float = 5.0
     integrator: str = "semi_implicit"
@@ -81,12 +85,14 @@ class SimConfig:
     seed: int = 0
     iterations: int = 2
     relax_iterations: int = 1
-    contact_hertz: float = 60.0  # capped at 1/(4 h); 30 Hz (Box2D's 2-D default) lets 3-D stacks of 20 fall
+    contact_hertz: float | None = None  # None: 1/(4 h), 60 Hz at the defaults; a number caps it
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     solver: str = "soft_step"
+    auto_substeps: bool = True  # more substeps where the tallest column would sag past column_sag
+    column_sag: float = 0.0075  # [m] soft-contact sag the auto substep count keeps columns under
     sleep: bool = True
     sleep_velocity: float = 0.05
     sleep_time: float = 0.5
@@ -175,6 +181,8 @@ class Simulator:
         if self.use_graph and config.broad_phase == "grid_hash" and config.body_contact:
             raise ValueError("broad_phase 'grid_hash' sizes wp.HashGrid on the host and cannot be captured; "
                              "set graph = false or another broad phase, got graph = true")
+        self.substep_plan = plan_substeps(model, config)
+        self.substeps = self.substep_plan.substeps
         self.solver = make_solver(config.solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
         dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
@@ -223,7 +231,7 @@ class Simulator:
 
     @property
     def substep_dt(self) -> float:
-        return self.config.dt / self.config.substeps
+        return self.config.dt / self.substeps
 
     def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False):
         """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between
@@ -296,7 +304,7 @@ class Simulator:
         # closable within dt, pairs are found with bounds swept over dt
         color_sizes = self._collide_pass(dt, margin, dt)
         refresh = self._refreshes_spheres()
-        for k in range(self.config.substeps):
+        for k in range(self.substeps):
             if k > 0 and self.config.recollide_outrun:
                 self._stage("pairs", self._recollide_outrun, dt - k * h, margin)
                 color_sizes = self._color_sizes
@@ -373,14 +381,14 @@ class Simulator:
         return self._color_sizes if self.pairs is not None else None
 
     def _keep_output_buffer(self):
-        if self.config.substeps % 2 == 1:
+        if self.substeps % 2 == 1:
             # Keep the captured graph's output in the buffer it started from.
             self.states[1].assign(self.states[0])
             self.states[0], self.states[1] = self.states[1], self.states[0]
 
     def _simulate_one_step_collide_each_substep(self):
         h = self.substep_dt
-        for _ in range(self.config.substeps):
+        for _ in range(self.substeps):
             color_sizes = self._collide_pass(h, self.config.speculative_margin, h)
             domains = self.pairs.domain_schedule() if self.pairs is not None else None
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
@@ -559,6 +567,8 @@ class Simulator:
         for key, value in changes.items():
             setattr(self.config, key, value)
         self.config.validate()
+        self.substep_plan = plan_substeps(self.model, self.config, self.state.body_pos.numpy())
+        self.substeps = self.substep_plan.substeps
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
         self.solver = make_solver(self.config.solver_settings(), self.config.gravity, self.device,
                                   self.model.body_count)

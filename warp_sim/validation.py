@@ -366,6 +366,8 @@ SIM_SCHEMA = {
     "iterations": Integer(ge=1),
     "relax_iterations": Integer(ge=0),
     "contact_hertz": Number(gt=0),
+    "auto_substeps": Boolean(),
+    "column_sag": Number(gt=0),
     "damping_ratio": Number(ge=0),
     "max_push_velocity": Number(gt=0),
     "restitution_threshold": Number(ge=0),

@@ -22,7 +22,8 @@ Normal impulse with accumulation and clamping (Catto's sequential impulses):
     J_acc = max(J_acc + j, 0)                                    never pull
 
 Soft constraint (Box2D's b2MakeSoft): a contact is a spring-damper of frequency
-f = min(contact_hertz, 1 / (4 h)) (default 60 Hz) and damping ratio zeta = 10.  With omega = 2 pi f,
+f = 1 / (4 h), or contact_hertz if that is lower (60 Hz at 4 substeps of 1/60 s), and damping
+ratio zeta = 10.  With omega = 2 pi f,
 a1 = 2 zeta + h omega, a2 = h omega a1, a3 = 1 / (1 + a2):
 biasRate = omega / a1, massScale = a2 a3, impulseScale = a3.  A speculative contact (gap s > 0)
 instead allows v_n >= -s / h, exactly closing the gap in one substep.  Push-out speed is capped.
@@ -40,6 +41,7 @@ import math
 
 import warp as wp
 
+from ..column_sag import contact_hertz as contact_frequency
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
 from .impact import impact_terrain
@@ -48,9 +50,10 @@ from .impact import impact_terrain
 wp.set_module_options({"enable_backward": False})
 
 
-def soft_coefficients(h: float, contact_hertz: float, damping_ratio: float) -> wp.vec3:
-    """(biasRate, massScale, impulseScale) for substep h; stiffness capped at a quarter of 1/h."""
-    hertz = min(contact_hertz, 0.25 / h)
+def soft_coefficients(h: float, contact_hertz: float | None, damping_ratio: float) -> wp.vec3:
+    """(biasRate, massScale, impulseScale) for substep h: a quarter of the substep rate, capped by
+    ``contact_hertz`` when one is set (warp_sim/column_sag.py says why the quarter)."""
+    hertz = contact_frequency(h, contact_hertz)
     omega = 2.0 * math.pi * hertz
     a1 = 2.0 * damping_ratio + h * omega
     a2 = h * omega * a1

@@ -32,15 +32,16 @@ class SolverSettings:
     """Contact solver constants (SimConfig documents each).  Sweeps per substep: 2 with bias plus 1
     relax.  Box2D v3 does 1 + 1; in 3-D that let a pyramid of base 10 creep 2.5 cm in 4 s, while
     2 + 1 holds it to 0.5 mm and a 20-box stack to 5 mm, at 3/4 of the cost of the 4 + 2 of
-    Solver2D's tests (tests/test_body_contact.py).  Contact stiffness: 60 Hz, Box2D's own cap of a
-    quarter of the substep rate at 4 substeps of 1/60 s (30 Hz, its 2-D default, lets a 3-D
-    stack of 20 fall)."""
+    Solver2D's tests (tests/test_body_contact.py).  Contact stiffness: Box2D's cap of a quarter of
+    the substep rate, 60 Hz at 4 substeps of 1/60 s, and stiffer with more substeps
+    (warp_sim/column_sag.py); ``contact_hertz`` caps it lower (30 Hz, Box2D's 2-D default, lets a
+    3-D stack of 20 fall)."""
 
     integrator: str = "semi_implicit"
     rotation: str = "quaternion"
     iterations: int = 2
     relax_iterations: int = 1
-    contact_hertz: float = 60.0  # capped at 1/(4 h); 30 Hz (Box2D's 2-D default) lets 3-D stacks of 20 fall
+    contact_hertz: float | None = None  # None: a quarter of the substep rate (column_sag.contact_hertz)
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
