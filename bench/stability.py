@@ -81,15 +81,18 @@ STRETCH_LIMIT = 1e-3
 DRIFT_LIMIT = 0.01
 DEPTH_SLOP = 0.01  # the gate's default: no body deeper than 1 cm in the terrain
 # name -> SimConfig overrides (dt 1/60 throughout)
+# (the fixed variants run exactly their substeps; "defaults" is what a scene gets without
+# choosing: 2 + 1 sweeps and auto_substeps, warp_sim/column_sag.py)
 VARIANTS = {
     "soft_step": {"solver": "soft_step", "iterations": 4, "substeps": 4},
     "soft_step it2": {"solver": "soft_step", "iterations": 2, "substeps": 4},
     "soft_step it1": {"solver": "soft_step", "iterations": 1, "substeps": 4},
     "soft_step 1 substep": {"solver": "soft_step", "iterations": 4, "substeps": 1},
     "pushout": {"solver": "pushout", "iterations": 4, "substeps": 4},
+    "defaults": {"solver": "soft_step", "iterations": 2, "substeps": 4, "auto_substeps": True},
 }
 VARIANT_COLORS = {"soft_step": "tab:blue", "soft_step it2": "tab:cyan", "soft_step it1": "tab:purple",
-                  "soft_step 1 substep": "tab:olive", "pushout": "tab:red"}
+                  "soft_step 1 substep": "tab:olive", "pushout": "tab:red", "defaults": "tab:green"}
 
 FULL = {
     "energy_dts": [1 / 240, 1 / 120, 1 / 60, 1 / 30, 1 / 15], "spins": [1.0, 2.0, 5.0, 10.0, 20.0, 40.0],
@@ -97,7 +100,7 @@ FULL = {
     "rotation_dts": [1 / 480, 1 / 240, 1 / 120, 1 / 60, 1 / 30, 1 / 15], "rotation_time": 5.0,
     "tunnel_dts": [1 / 240, 1 / 120, 1 / 60, 1 / 30, 1 / 15], "speeds": [5.0, 10.0, 20.0, 40.0, 80.0],
     "angles": [90.0, 45.0, 15.0],
-    "heights": [2, 4, 8, 12, 16, 20, 24], "stack_time": 10.0,
+    "heights": [2, 4, 8, 12, 16, 20, 24, 32, 40], "stack_time": 10.0,
     "bases": [2, 3, 4, 5, 6, 7, 8, 9, 10], "pyramid_time": 5.0,
     "jitter_dts": [1 / 30, 1 / 60, 1 / 120, 1 / 240], "jitter_time": 2.0,
     "variants": list(VARIANTS),
@@ -231,7 +234,8 @@ def box_scene(positions, variant: str) -> Simulator:
         b.add_box((0.5, 0.5, 0.5), 1.0, position=p)
     v = VARIANTS[variant]
     return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=v["substeps"], solver=v["solver"],
-                                              iterations=v["iterations"], sleep=False))
+                                              iterations=v["iterations"], sleep=False,
+                                              auto_substeps=v.get("auto_substeps", False)))
 
 
 def watch(sim: Simulator, t_end: float, watched: slice) -> dict:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MAX_AUTO_SUBSTEPS = 32
+MAX_AUTO_SUBSTEPS = 64
 
 
 def contact_hertz(h: float, setting: float | None) -> float:

@@ -132,7 +132,7 @@ def info_command(args) -> int:
     boxes = len(shapes) - spheres
     moving_spheres = int(np.count_nonzero((shapes == SHAPE_SPHERE) & ~static))
     moving_boxes = int(np.count_nonzero((shapes != SHAPE_SPHERE) & ~static))
-    cost = expected_step_seconds(moving_spheres, moving_boxes, cfg.substeps, cfg.body_contact)
+    cost = expected_step_seconds(moving_spheres, moving_boxes, sim.substeps, cfg.body_contact)
     contacts = sim.contacts
     lines = [
         f"scene       {scene.name} ({args.scene})",
@@ -143,6 +143,7 @@ def info_command(args) -> int:
         + ("" if cfg.body_contact else " (body contact off)"),
         f"settings    dt {cfg.dt:.6g} s, {cfg.substeps} substeps, {cfg.integrator}, {cfg.solver}, "
         f"{cfg.duration:g} s = {expected_steps(cfg.duration, cfg.dt):,} steps",
+        f"substeps    {sim.substep_plan.describe()}",
         f"memory      {memory / 2**20:,.1f} MiB of Warp arrays (built on the CPU; CUDA holds the same)",
         f"cost        ~{cost * 1e3:,.3g} ms a step, all bodies awake, on the 2-core CI CPU "
         f"({'body contact' if cfg.body_contact else 'terrain only'} model of warp_sim/commands.py)",
