@@ -74,15 +74,15 @@ class SubstepPlan:
 def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarray):
     """For every column of one grid: (bodies, sum of g-free sag terms W_above / m_pair).  Only the
     series is computed here; multiply by g / omega^2 for metres."""
-    horizontal = pos - np.outer(pos @ up, up)
     a = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     e1 = np.cross(up, a)
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(up, e1)
+    across = np.stack([pos @ e1, pos @ e2], 1) / width  # horizontal coordinates, in columns
+    height = pos @ up
     best_terms, best_count = 0.0, 0
     for offset in (0.0, 0.5):
-        cells = np.floor(np.stack([horizontal @ e1, horizontal @ e2], 1) / width + offset).astype(np.int64)
-        height = pos @ up
+        cells = np.floor(across + offset).astype(np.int64)
         order = np.lexsort((height, cells[:, 1], cells[:, 0]))
         keys = cells[order]
         m = mass[order]
@@ -125,6 +125,5 @@ def plan_substeps(model, config, pos: np.ndarray | None = None) -> SubstepPlan:
     if config.auto_substeps:
         while sag(chosen) > config.column_sag and chosen < MAX_AUTO_SUBSTEPS:
             chosen += 1
-        chosen = max(chosen, requested)
     return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), config.column_sag,
                        bool(config.auto_substeps))

@@ -567,6 +567,7 @@ class Simulator:
         for key, value in changes.items():
             setattr(self.config, key, value)
         self.config.validate()
+        # between steps (the graph is captured again below): plan on the columns standing now
         self.substep_plan = plan_substeps(self.model, self.config, self.state.body_pos.numpy())
         self.substeps = self.substep_plan.substeps
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))

@@ -267,13 +267,20 @@ SAME_FACE_COS = wp.constant(0.9962)
 
 
 @wp.func
-def closest_unclaimed(point: wp.vec3, q: int, old_count: int, claimed: int, prev_pair_point: wp.array(dtype=wp.vec3)) -> int:
-    """Last pass's point of pair q nearest to ``point`` that no other new point has taken, if it
-    lies within half the smallest spacing of last pass's points (so it is the only candidate), else -1."""
+def smallest_spacing(q: int, old_count: int, prev_pair_point: wp.array(dtype=wp.vec3)) -> float:
     spacing = float(1.0e30)
     for a in range(old_count):
         for b in range(a + 1, old_count):
             spacing = wp.min(spacing, wp.length(prev_pair_point[q * POINTS + a] - prev_pair_point[q * POINTS + b]))
+    return spacing
+
+
+@wp.func
+def closest_unclaimed(point: wp.vec3, q: int, old_count: int, claimed: int, spacing: float,
+                      prev_pair_point: wp.array(dtype=wp.vec3)) -> int:
+    """Last pass's point of pair q nearest to ``point`` that no other new point has taken, if it
+    lies within half the smallest ``spacing`` of last pass's points (so it is the only candidate),
+    else -1."""
     best = int(-1)
     best_distance = 0.5 * spacing
     for kk in range(old_count):
@@ -335,14 +342,16 @@ def carry_pair_impulses(
                 source[k] = kk
                 claimed = claimed | (1 << kk)
     same_face = int(0)
-    if q >= 0:
+    if old_count > 1:  # then q >= 0
         same_face = wp.where(wp.dot(pair_normal[p], prev_pair_normal[q]) > SAME_FACE_COS, 1, 0)
-    for k in range(count):
-        if source[k] < 0 and old_count > 1 and same_face != 0:
-            kk = closest_unclaimed(pair_point[p * POINTS + k], q, old_count, claimed, prev_pair_point)
-            if kk >= 0:
-                source[k] = kk
-                claimed = claimed | (1 << kk)
+    if same_face != 0:
+        spacing = smallest_spacing(q, old_count, prev_pair_point)
+        for k in range(count):
+            if source[k] < 0:
+                kk = closest_unclaimed(pair_point[p * POINTS + k], q, old_count, claimed, spacing, prev_pair_point)
+                if kk >= 0:
+                    source[k] = kk
+                    claimed = claimed | (1 << kk)
     for k in range(POINTS):
         slot = p * POINTS + k
         normal_impulse = float(0.0)
