@@ -73,7 +73,11 @@ def test_every_touching_pair_is_solved_in_exactly_one_place(rain):
     pairs = int(c.pair_count.numpy()[0])
     touching = np.nonzero(c.pair_point_count.numpy()[:pairs] > 0)[0]
     listed = pair_list[: pair_start[-1]]
-    assert np.array_equal(np.sort(listed), touching)
+    # each pair once; every pair with points now is listed (a pair refreshed mid-step, see
+    # solvers/pair_refresh.py, may have lost its points since the pass listed it, never gained)
+    assert len(np.unique(listed)) == len(listed)
+    assert np.all(np.isin(touching, listed))
+    assert len(listed) - len(touching) <= 0.05 * len(listed)
     bodies = c.pair_body.numpy()
     for d in range(DOMAINS):
         for p in pair_list[pair_start[d]:pair_start[d + 1]]:

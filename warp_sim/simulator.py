@@ -53,6 +53,7 @@ from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pai
 from .sleep import AwakeModel, Sleep
 from .launch import cpu_threads, launch
 from .model import Model
+from .solvers.pair_refresh import refresh_turned
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
@@ -102,6 +103,7 @@ class SimConfig:
     contact_max: int = 0
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
     recollide_outrun: bool = True  # "step" updates: find the pairs again mid-step if a body outruns its reach
+    turn_refresh: float = 0.005  # [m] "step" updates: a pair whose bodies turned this far since the pass is found again; 0: never
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
     allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
     graph: bool | None = None  # capture the whole step as one graph and replay it; None: on CUDA only
@@ -203,6 +205,7 @@ class Simulator:
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
         self.outrun = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.outrun_passes = wp.zeros(1, dtype=wp.int32, device=self.device)  # mid-step passes run, ever
+        self.refreshed_pairs = wp.zeros(1, dtype=wp.int32, device=self.device)  # turned pairs found again, ever
         self._saved = None  # the state at the start of a step() call, when its steps are captured
         self._warm = False
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -310,6 +313,9 @@ class Simulator:
                 color_sizes = self._color_sizes
             if k > 0 and refresh:
                 self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin, True)
+            if k > 0 and self.config.turn_refresh > 0.0:
+                self._stage("pairs", refresh_turned, self.physics_model, self.states[0], self.solver, self.pairs,
+                            self.contacts, margin, self.config.turn_refresh, self.refreshed_pairs)
             after_impacts = None
             if self.config.recollide_outrun and self.physics_model.has_restitution:
                 after_impacts = functools.partial(self._recollide_outrun, dt - k * h, margin, True)

@@ -382,6 +382,7 @@ SIM_SCHEMA = {
     "contact_max": Integer(ge=0),
     "contact_update": Choice(CONTACT_UPDATES),
     "recollide_outrun": Boolean(),
+    "turn_refresh": Number(ge=0),
     "pair_schedule": Choice(PAIR_SCHEDULES),
     "allow_initial_overlap": Boolean(),
     "graph": Boolean(),

@@ -15,7 +15,7 @@ features and impulses into the ``prev_*`` arrays once the solve is done.
 
 import warp as wp
 
-from .primitives import collide_pair
+from .primitives import collide_pair, mat43
 
 wp.set_module_options({"enable_backward": False})
 
@@ -292,6 +292,37 @@ def closest_unclaimed(point: wp.vec3, q: int, old_count: int, claimed: int, spac
     return best
 
 
+@wp.func
+def match_old_points(count: int, feature: wp.vec4i, point: mat43, normal: wp.vec3, q: int, old_count: int,
+                     prev_pair_feature: wp.array(dtype=wp.int32), prev_pair_normal: wp.array(dtype=wp.vec3),
+                     prev_pair_point: wp.array(dtype=wp.vec3)) -> wp.vec4i:
+    """For each of ``count`` new points of a pair, the old point of pair q (``old_count`` of
+    them) whose impulses it takes, or -1: the same feature id first, then the nearest unclaimed
+    old point (``closest_unclaimed``) if the pair's normal has turned by less than SAME_FACE_COS
+    (the same faces still meet: a load carried along a normal that turned further would push
+    the wrong way).  No old point is taken twice."""
+    claimed = int(0)
+    source = wp.vec4i(-1, -1, -1, -1)
+    for k in range(count):
+        for kk in range(old_count):
+            if prev_pair_feature[q * POINTS + kk] == feature[k] and (claimed & (1 << kk)) == 0 and source[k] < 0:
+                source[k] = kk
+                claimed = claimed | (1 << kk)
+    same_face = int(0)
+    if old_count > 1:  # then q >= 0
+        same_face = wp.where(wp.dot(normal, prev_pair_normal[q]) > SAME_FACE_COS, 1, 0)
+    if same_face != 0:
+        spacing = smallest_spacing(q, old_count, prev_pair_point)
+        for k in range(count):
+            if source[k] < 0:
+                kk = closest_unclaimed(wp.vec3(point[k, 0], point[k, 1], point[k, 2]), q, old_count, claimed, spacing,
+                                       prev_pair_point)
+                if kk >= 0:
+                    source[k] = kk
+                    claimed = claimed | (1 << kk)
+    return source
+
+
 @wp.kernel
 def carry_pair_impulses(
     tid_offset: int,
@@ -315,10 +346,7 @@ def carry_pair_impulses(
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
 ):
-    """Each new point takes the impulses of last pass's point with its feature id; a point whose
-    feature is new takes those of the nearest unclaimed old point (``closest_unclaimed``), if the
-    pair's normal has turned by less than SAME_FACE_COS (the same faces still meet: a load carried
-    along a normal that turned further would push the wrong way).
+    """Each new point takes the impulses of last pass's point that ``match_old_points`` gives it.
 
     Why the fallback: two equal boxes resting face on face have their incident corners exactly on
     the reference face's side planes, so a rounding-level turn decides whether a point is a corner
@@ -333,25 +361,13 @@ def carry_pair_impulses(
     old_count = int(0)
     if q >= 0:
         old_count = prev_pair_point_count[q]
-    claimed = int(0)
-    source = wp.vec4i(-1, -1, -1, -1)
+    feature = wp.vec4i(-1, -1, -1, -1)
+    point = mat43()
     for k in range(count):
-        feature = pair_feature[p * POINTS + k]
-        for kk in range(old_count):
-            if prev_pair_feature[q * POINTS + kk] == feature and (claimed & (1 << kk)) == 0:
-                source[k] = kk
-                claimed = claimed | (1 << kk)
-    same_face = int(0)
-    if old_count > 1:  # then q >= 0
-        same_face = wp.where(wp.dot(pair_normal[p], prev_pair_normal[q]) > SAME_FACE_COS, 1, 0)
-    if same_face != 0:
-        spacing = smallest_spacing(q, old_count, prev_pair_point)
-        for k in range(count):
-            if source[k] < 0:
-                kk = closest_unclaimed(pair_point[p * POINTS + k], q, old_count, claimed, spacing, prev_pair_point)
-                if kk >= 0:
-                    source[k] = kk
-                    claimed = claimed | (1 << kk)
+        feature[k] = pair_feature[p * POINTS + k]
+        point[k] = pair_point[p * POINTS + k]
+    source = match_old_points(count, feature, point, pair_normal[p], q, old_count, prev_pair_feature,
+                              prev_pair_normal, prev_pair_point)
     for k in range(POINTS):
         slot = p * POINTS + k
         normal_impulse = float(0.0)

@@ -42,6 +42,20 @@ class PairPoint:
 
 
 @wp.func
+def anchor_weight(sphere_radius_i: float, sphere_radius_j: float, inv_mass_i: float, inv_mass_j: float) -> float:
+    """w: the point follows a sphere's anchor (its support point, exact), else the bodies'
+    anchors weighted by inverse mass (a static body's not at all, equal masses: the midpoint)."""
+    follow_i = float(0.5)
+    if sphere_radius_i > 0.0:
+        follow_i = 1.0
+    elif sphere_radius_j > 0.0:
+        follow_i = 0.0
+    elif inv_mass_i + inv_mass_j > 0.0:
+        follow_i = inv_mass_i / (inv_mass_i + inv_mass_j)
+    return follow_i
+
+
+@wp.func
 def pair_point_now(
     n_ref: wp.vec3,
     point: wp.vec3,
@@ -83,15 +97,7 @@ def pair_point_now(
     moved = (drift_p_i + drift_r_i * ri) - (drift_p_j + drift_r_j * rj)
     out.normal = n_ref
     out.separation = -depth + wp.dot(moved, n_ref)
-    # the point follows a sphere's anchor (its support point, exact), else the bodies' anchors
-    # weighted by inverse mass (a static body's not at all, equal masses: the midpoint)
-    follow_i = float(0.5)
-    if sphere_radius_i > 0.0:
-        follow_i = 1.0
-    elif sphere_radius_j > 0.0:
-        follow_i = 0.0
-    elif inv_mass_i + inv_mass_j > 0.0:
-        follow_i = inv_mass_i / (inv_mass_i + inv_mass_j)
+    follow_i = anchor_weight(sphere_radius_i, sphere_radius_j, inv_mass_i, inv_mass_j)
     relative = drift_p_i - drift_p_j
     out.arm_i = ri - (1.0 - follow_i) * relative
     out.arm_j = rj + follow_i * relative
