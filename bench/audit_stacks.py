@@ -258,6 +258,10 @@ def thin_box_rain(quick: bool) -> list[dict]:
         variants = [("mixed_rain.toml, 4 x 10 x 4", mixed, {}, 2.0), ("plates, 3 x 10 x 3", plates, {}, 2.0)]
     else:
         variants = [("mixed_rain.toml as shipped", mixed, {}, 5.0), ("plates, 6 x 10 x 6", plates, {}, 5.0),
+                    ("mixed_rain.toml, turn_refresh 0 (the step's manifold only)", mixed, {"turn_refresh": 0.0}, 5.0),
+                    ("plates, 6 x 10 x 6, turn_refresh 0", plates, {"turn_refresh": 0.0}, 5.0),
+                    ("mixed_rain.toml, 8 substeps", mixed, {"substeps": 8}, 5.0),
+                    ("plates, 6 x 10 x 6, 8 substeps", plates, {"substeps": 8}, 5.0),
                     ("plates, 6 x 10 x 6, contacts every substep", plates, {"contact_update": "substep"}, 5.0),
                     ("plates, 6 x 10 x 6, 8 substeps, every substep", plates,
                      {"contact_update": "substep", "substeps": 8}, 5.0)]
