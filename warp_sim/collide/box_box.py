@@ -289,6 +289,21 @@ def segment_closest(pa: wp.vec3, u: wp.vec3, ha: float, pb: wp.vec3, v: wp.vec3,
 
 
 @wp.func
+def supporting_edge_points(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: int, rot_b: wp.mat33,
+                           half_b: wp.vec3, edge_b: int, normal: wp.vec3):
+    """The closest points of A's edge along ``edge_a`` furthest towards B and B's edge along
+    ``edge_b`` furthest towards A (B at the origin, ``normal`` from B into A), and the pair's
+    feature id."""
+    centre_a, signs_a = box_support_edge(pos_a, rot_a, half_a, edge_a, -normal)
+    centre_b, signs_b = box_support_edge(wp.vec3(0.0), rot_b, half_b, edge_b, normal)
+    u = mat_column(rot_a, edge_a)
+    v = mat_column(rot_b, edge_b)
+    st = segment_closest(centre_a, u, half_a[edge_a], centre_b, v, half_b[edge_b])
+    feature = BOX_FEATURE_COUNT * box_feature_id(signs_a) + box_feature_id(signs_b)
+    return centre_a + st[0] * u, centre_b + st[1] * v, feature
+
+
+@wp.func
 def box_edge_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: int, rot_b: wp.mat33,
                      half_b: wp.vec3, edge_b: int, normal: wp.vec3, depth: float,
                      origin: wp.vec3) -> Manifold:
@@ -297,18 +312,10 @@ def box_edge_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: i
     axis's separation is only a lower bound of the gap (the edges' closest points may be clamped
     to their ends, further apart), and a gap understated would stop the bodies before they touch:
     the gap is then the closest points' distance, a true distance of two surface points."""
-    centre_a, signs_a = box_support_edge(pos_a, rot_a, half_a, edge_a, -normal)
-    centre_b, signs_b = box_support_edge(wp.vec3(0.0), rot_b, half_b, edge_b, normal)
-    u = mat_column(rot_a, edge_a)
-    v = mat_column(rot_b, edge_b)
-    st = segment_closest(centre_a, u, half_a[edge_a], centre_b, v, half_b[edge_b])
-    on_a = centre_a + st[0] * u
-    on_b = centre_b + st[1] * v
-    point = origin + 0.5 * (on_a + on_b)
+    on_a, on_b, feature = supporting_edge_points(pos_a, rot_a, half_a, edge_a, rot_b, half_b, edge_b, normal)
     if depth < 0.0:
         depth = wp.min(depth, -wp.length(on_a - on_b))
-    return manifold_single(normal, point, depth,
-                           BOX_FEATURE_COUNT * box_feature_id(signs_a) + box_feature_id(signs_b))
+    return manifold_single(normal, origin + 0.5 * (on_a + on_b), depth, feature)
 
 
 @wp.func
@@ -316,6 +323,13 @@ def vertex_signs(v: int) -> wp.vec3:
     """Box-frame signs of vertex v = 0..7 (bit k set: minus on axis k)."""
     return wp.vec3(wp.where((v & 1) != 0, -1.0, 1.0), wp.where((v & 2) != 0, -1.0, 1.0),
                    wp.where((v & 4) != 0, -1.0, 1.0))
+
+
+@wp.func
+def clamp_to_box(local: wp.vec3, half: wp.vec3) -> wp.vec3:
+    """The point of a box (box-frame coordinates) nearest ``local``."""
+    return wp.vec3(wp.clamp(local[0], -half[0], half[0]), wp.clamp(local[1], -half[1], half[1]),
+                   wp.clamp(local[2], -half[2], half[2]))
 
 
 @wp.func
@@ -355,8 +369,7 @@ def separated_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: 
         signs = vertex_signs(vertex)
         p = pos_a + rot_a * wp.cw_mul(signs, half_a)
         q = wp.transpose(rot_b) * p
-        c = wp.vec3(wp.clamp(q[0], -half_b[0], half_b[0]), wp.clamp(q[1], -half_b[1], half_b[1]),
-                    wp.clamp(q[2], -half_b[2], half_b[2]))
+        c = clamp_to_box(q, half_b)
         gap = wp.length(q - c)
         if gap < best and gap > 1.0e-6:
             best = gap
@@ -365,25 +378,18 @@ def separated_contact(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, edge_a: 
         # a vertex of B against A, in A's frame; the normal points from B into A
         p = rot_b * wp.cw_mul(signs, half_b)
         q = wp.transpose(rot_a) * (p - pos_a)
-        c = wp.vec3(wp.clamp(q[0], -half_a[0], half_a[0]), wp.clamp(q[1], -half_a[1], half_a[1]),
-                    wp.clamp(q[2], -half_a[2], half_a[2]))
+        c = clamp_to_box(q, half_a)
         gap = wp.length(q - c)
         if gap < best and gap > 1.0e-6:
             best = gap
             m = manifold_single(-(rot_a * (q - c)) / gap, origin + 0.5 * (p + pos_a + rot_a * c), -gap,
                                 BOX_FEATURE_COUNT * box_feature_id(region_signs(q, half_a)) + box_feature_id(signs))
     if has_edge_axis != 0:
-        centre_a, signs_a = box_support_edge(pos_a, rot_a, half_a, edge_a, -edge_normal)
-        centre_b, signs_b = box_support_edge(wp.vec3(0.0), rot_b, half_b, edge_b, edge_normal)
-        u = mat_column(rot_a, edge_a)
-        v = mat_column(rot_b, edge_b)
-        st = segment_closest(centre_a, u, half_a[edge_a], centre_b, v, half_b[edge_b])
-        on_a = centre_a + st[0] * u
-        on_b = centre_b + st[1] * v
+        on_a, on_b, feature = supporting_edge_points(pos_a, rot_a, half_a, edge_a, rot_b, half_b, edge_b,
+                                                     edge_normal)
         gap = wp.length(on_a - on_b)
         if gap < best and gap > 1.0e-6:
-            m = manifold_single((on_a - on_b) / gap, origin + 0.5 * (on_a + on_b), -gap,
-                                BOX_FEATURE_COUNT * box_feature_id(signs_a) + box_feature_id(signs_b))
+            m = manifold_single((on_a - on_b) / gap, origin + 0.5 * (on_a + on_b), -gap, feature)
     return m
 
 
