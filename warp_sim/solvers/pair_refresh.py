@@ -14,10 +14,12 @@ from 1.3-2.8 cm to 0.2-0.5 cm, while more substeps or sweeps with the step's man
 So before each later substep, a pair whose bodies have turned by more than the tolerance since
 the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can have
 swung) is collided again at the current pose, and only that pair: in a settled pile nothing
-turns and nothing is found again.  Only box-box pairs are refreshed: two spheres are exact
-already (their normal and gap follow the centres), and a sphere's point on a box follows the
-sphere's centre, so a box turning under it only tilts the normal (an error of the turn times the
-gap, not times the box's size).
+turns and nothing is found again.  Two spheres are never refreshed (their normal and gap follow
+the centres, exactly), and a sphere's own turn counts for nothing; a box turning under or beside
+a sphere does count: its face tilts under the sphere's fixed normal and the point slides off
+the face the pass found (in `mixed_rain.toml`, boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every
+pair deeper than 2 cm was a sphere-box pair until these were refreshed too: 75 mm -> 20 mm).
+A sphere's pair keeps its second slot's rolling-resistance impulse through the refresh.
 
 The new manifold is written in the reference representation the solver reads, so nothing else
 changes: for a point p found now with depth d and normal n, with the bodies displaced by dp_i,
@@ -94,10 +96,16 @@ def refresh_turned_pairs(
     ij = pair_body[p]
     i = ij[0]
     j = ij[1]
-    if body_shape[i] == SHAPE_SPHERE or body_shape[j] == SHAPE_SPHERE:
+    sphere_i = body_shape[i] == SHAPE_SPHERE
+    sphere_j = body_shape[j] == SHAPE_SPHERE
+    if sphere_i and sphere_j:
         return
-    swing = (turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
-             + turn_angle(body_rot[j], solver_ref_rot[j]) * body_bound_radius[j])
+    # a sphere's own turn moves none of its surface
+    swing = float(0.0)
+    if not sphere_i:
+        swing += turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
+    if not sphere_j:
+        swing += turn_angle(body_rot[j], solver_ref_rot[j]) * body_bound_radius[j]
     if swing <= turn_tolerance:
         return
     # the pass's margin (collide_pairs): the reaches still cover the rest of the step
@@ -110,7 +118,7 @@ def refresh_turned_pairs(
     dpj = body_pos[j] - xj
     turn_i = body_rot[i] * wp.transpose(solver_ref_rot[i]) - wp.identity(3, dtype=float)
     turn_j = body_rot[j] * wp.transpose(solver_ref_rot[j]) - wp.identity(3, dtype=float)
-    w = anchor_weight(0.0, 0.0, body_inv_mass[i], body_inv_mass[j])
+    w = anchor_weight(wp.where(sphere_i, 1.0, 0.0), wp.where(sphere_j, 1.0, 0.0), body_inv_mass[i], body_inv_mass[j])
     point = mat43()
     depth = wp.vec4(0.0)
     for k in range(m.count):
@@ -127,6 +135,9 @@ def refresh_turned_pairs(
         if source[k] >= 0:
             normal_impulse[k] = pair_normal_impulse[p * POINTS + source[k]]
             tangent_impulse[k] = pair_tangent_impulse[p * POINTS + source[k]]
+    if sphere_i or sphere_j:
+        # a sphere's pair has one point; its second slot keeps the rolling resistance's impulse
+        tangent_impulse[1] = pair_tangent_impulse[p * POINTS + 1]
     pair_point_count[p] = m.count
     pair_normal[p] = m.normal
     for k in range(POINTS):
