@@ -3,7 +3,7 @@
 The refreshed manifold is stored in the solver's reference representation; what must hold is
 that the solver then reads exactly the contact a fresh narrow phase finds at the current pose:
 pair_point_now's gap is minus the fresh depth, and both arms end at the fresh point.  The poses
-here are random (plates and cubes turned by up to 0.4 rad and moved by up to 5 cm since the
+here are random (plates, cubes, and balls on boxes, turned by up to 0.4 rad and moved by up to 5 cm since the
 reference pose), built by hand, so each kernel is checked alone.
 """
 
@@ -12,17 +12,18 @@ import pytest
 import warp as wp
 
 from test_primitives import rotation
-from warp_sim.collide.primitives import collide_box_box
+from warp_sim.collide.primitives import collide_pair
 from warp_sim.solvers.pair_geometry import pair_point_now
 from warp_sim.solvers.pair_refresh import refresh_turned_pairs
+from warp_sim.types import SHAPE_BOX, SHAPE_SPHERE
 
 POINTS = 4
 MARGIN = 0.05
 
 
 @wp.kernel
-def fresh_and_read(pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33), half: wp.array(dtype=wp.vec3),
-                   inv_mass: wp.array(dtype=float), ref_pos: wp.array(dtype=wp.vec3),
+def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33),
+                   half: wp.array(dtype=wp.vec3), radius: wp.array(dtype=float), inv_mass: wp.array(dtype=float), ref_pos: wp.array(dtype=wp.vec3),
                    ref_rot: wp.array(dtype=wp.mat33), pair_normal: wp.array(dtype=wp.vec3),
                    pair_point: wp.array(dtype=wp.vec3), pair_depth: wp.array(dtype=float),
                    pair_point_count: wp.array(dtype=wp.int32), margin: float,
@@ -30,7 +31,7 @@ def fresh_and_read(pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33), 
                    read_gap: wp.array(dtype=float), read_end_i: wp.array(dtype=wp.vec3),
                    read_end_j: wp.array(dtype=wp.vec3), fresh_count: wp.array(dtype=wp.int32)):
     """The fresh manifold at the current pose, and what the solver reads from the stored one."""
-    m = collide_box_box(pos[0], rot[0], half[0], pos[1], rot[1], half[1], margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], shape[1], pos[1], rot[1], half[1], margin)
     fresh_count[0] = m.count
     for k in range(m.count):
         fresh_depth[k] = m.depth[k]
@@ -41,7 +42,7 @@ def fresh_and_read(pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33), 
     drj = rot[1] * wp.transpose(ref_rot[1]) - wp.identity(3, dtype=float)
     for k in range(pair_point_count[0]):
         now = pair_point_now(pair_normal[0], pair_point[k], pair_depth[k], ref_pos[0], ref_pos[1], dpi, dpj, dri, drj,
-                             0.0, 0.0, inv_mass[0], inv_mass[1])
+                             radius[0], radius[1], inv_mass[0], inv_mass[1])
         read_gap[k] = now.separation
         read_end_i[k] = pos[0] + now.arm_i
         read_end_j[k] = pos[1] + now.arm_j
@@ -54,11 +55,14 @@ def arrays(values, dtype):
 def refresh(case, tolerance=0.0):
     """Stores the reference pose's manifold as the pass would, moves the bodies, runs the kernel;
     returns the stored arrays after it and the fresh contact at the current pose."""
+    shape = arrays(case["shape"], wp.int32)
     half = arrays(case["half"], wp.vec3)
+    radius = arrays([h[0] if k == SHAPE_SPHERE else 0.0 for k, h in zip(case["shape"], case["half"])], float)
     inv_mass = arrays(case["inv_mass"], float)
     ref_pos, ref_rot = arrays(case["ref_pos"], wp.vec3), arrays(case["ref_rot"], wp.mat33)
     pos, rot = arrays(case["pos"], wp.vec3), arrays(case["rot"], wp.mat33)
-    bound = arrays([np.linalg.norm(h) for h in case["half"]], float)
+    bound = arrays([h[0] if k == SHAPE_SPHERE else np.linalg.norm(h) for k, h in zip(case["shape"], case["half"])],
+                   float)
     n = wp.zeros(1, dtype=wp.vec3, device="cpu")
     count = wp.zeros(1, dtype=wp.int32, device="cpu")
     points = wp.zeros(POINTS, dtype=wp.vec3, device="cpu")
@@ -67,18 +71,19 @@ def refresh(case, tolerance=0.0):
     fresh_count = wp.zeros(1, dtype=wp.int32, device="cpu")
     # the pass at the reference pose: its manifold is stored as is (drift zero there)
     features = wp.zeros(POINTS, dtype=wp.int32, device="cpu")
-    wp.launch(store_pass, 1, device="cpu", inputs=[ref_pos, ref_rot, half, MARGIN, n, points, depths, features, count])
+    wp.launch(store_pass, 1, device="cpu", inputs=[shape, ref_pos, ref_rot, half, MARGIN, n, points, depths, features,
+                                                   count])
     impulses = wp.array(np.arange(1, POINTS + 1, dtype=np.float32), dtype=float, device="cpu")
     tangents = wp.array(np.tile(np.float32([0.1, 0.0, 0.0]), (POINTS, 1)), dtype=wp.vec3, device="cpu")
     before = {"count": count.numpy().copy(), "normal": n.numpy().copy(), "point": points.numpy().copy(),
               "depth": depths.numpy().copy(), "feature": features.numpy().copy(), "impulse": impulses.numpy().copy()}
     refreshed = wp.zeros(1, dtype=wp.int32, device="cpu")
     wp.launch(refresh_turned_pairs, 1, device="cpu", inputs=[
-        0, arrays([1, 1], wp.int32), half, bound, inv_mass, MARGIN, tolerance, pos, rot, ref_pos, ref_rot,
+        0, shape, half, bound, inv_mass, MARGIN, tolerance, pos, rot, ref_pos, ref_rot,
         bound, arrays([1], wp.int32), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device="cpu"),
         count, n, points, depths, features, impulses, tangents, refreshed])
-    wp.launch(fresh_and_read, 1, device="cpu", inputs=[pos, rot, half, inv_mass, ref_pos, ref_rot, n, points, depths,
-                                                       count, MARGIN, *scratch, fresh_count])
+    wp.launch(fresh_and_read, 1, device="cpu", inputs=[shape, pos, rot, half, radius, inv_mass, ref_pos, ref_rot, n,
+                                                       points, depths, count, MARGIN, *scratch, fresh_count])
     after = {"count": count.numpy(), "normal": n.numpy(), "point": points.numpy(), "depth": depths.numpy(),
              "feature": features.numpy(), "impulse": impulses.numpy(), "refreshed": int(refreshed.numpy()[0])}
     fresh = {"count": int(fresh_count.numpy()[0]), "depth": scratch[0].numpy(), "point": scratch[1].numpy(),
@@ -87,10 +92,10 @@ def refresh(case, tolerance=0.0):
 
 
 @wp.kernel
-def store_pass(pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33), half: wp.array(dtype=wp.vec3),
-               margin: float, normal: wp.array(dtype=wp.vec3), point: wp.array(dtype=wp.vec3),
+def store_pass(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33),
+               half: wp.array(dtype=wp.vec3), margin: float, normal: wp.array(dtype=wp.vec3), point: wp.array(dtype=wp.vec3),
                depth: wp.array(dtype=float), feature: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
-    m = collide_box_box(pos[0], rot[0], half[0], pos[1], rot[1], half[1], margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], shape[1], pos[1], rot[1], half[1], margin)
     count[0] = m.count
     normal[0] = m.normal
     for k in range(4):
@@ -100,27 +105,34 @@ def store_pass(pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33), half
 
 
 def random_case(rng, half_a, half_b, turn):
-    """B below, A resting on it with a tilt; then both move and turn since the reference pose."""
+    """B below, A resting on it with a tilt (A a sphere of radius half_a[0] when half_a has one
+    entry); then both move and turn since the reference pose."""
+    height_a = half_a[0] if len(half_a) == 1 else half_a[1]
     ref_rot_b = rotation(rng.normal(size=3), rng.uniform(0, 0.2))
     ref_rot_a = rotation(rng.normal(size=3), rng.uniform(0, 0.3)) @ ref_rot_b
     ref_pos_b = rng.normal(size=3) * 0.1
-    ref_pos_a = ref_pos_b + ref_rot_b @ np.array([rng.uniform(-0.2, 0.2), half_b[1] + half_a[1] + 0.02,
+    ref_pos_a = ref_pos_b + ref_rot_b @ np.array([rng.uniform(-0.2, 0.2), half_b[1] + height_a + 0.02,
                                                   rng.uniform(-0.2, 0.2)])
     rot_a = rotation(rng.normal(size=3), turn) @ ref_rot_a
     rot_b = rotation(rng.normal(size=3), 0.25 * turn) @ ref_rot_b
     pos_a = ref_pos_a + rng.uniform(-0.05, 0.05, size=3) - np.array([0.0, 0.03, 0.0])
     pos_b = ref_pos_b + rng.uniform(-0.02, 0.02, size=3)
-    return {"half": [half_a, half_b], "inv_mass": [1.0 / rng.uniform(1, 100), 1.0 / rng.uniform(1, 100)],
+    shape = [SHAPE_SPHERE if len(half_a) == 1 else SHAPE_BOX, SHAPE_BOX]
+    if len(half_a) == 1:  # a sphere of that radius resting on B
+        half_a = (half_a[0], 0.0, 0.0)
+    return {"shape": shape, "half": [half_a, half_b], "inv_mass": [1.0 / rng.uniform(1, 100), 1.0 / rng.uniform(1, 100)],
             "ref_pos": [ref_pos_a, ref_pos_b], "ref_rot": [ref_rot_a, ref_rot_b],
             "pos": [pos_a, pos_b], "rot": [rot_a, rot_b]}
 
 
-@pytest.mark.parametrize("half_a, half_b", [((0.3, 0.1, 0.3), (0.3, 0.1, 0.3)), ((0.5, 0.5, 0.5), (0.6, 0.1, 0.4))])
+@pytest.mark.parametrize("half_a, half_b", [((0.3, 0.1, 0.3), (0.3, 0.1, 0.3)), ((0.5, 0.5, 0.5), (0.6, 0.1, 0.4)),
+                                            ((0.2,), (0.25, 0.15, 0.1))])
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, half_b, seed):
     """For each refreshed point the solver's gap is minus the fresh depth and both arms end at
     the fresh point (float32 rounding on metre-sized bodies: 2e-5 m); the point count and order
-    are the fresh manifold's; a point whose feature id survives keeps its accumulated impulse."""
+    are the fresh manifold's; a point whose feature id survives keeps its accumulated impulse.
+    Plates, cubes on plates, and a ball on a turning thin box (its one point follows the ball)."""
     rng = np.random.default_rng(seed)
     checked = kept = 0
     for _ in range(8):
@@ -137,7 +149,7 @@ def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, h
                 assert j == old[int(f)]
                 kept += 1
         checked += n
-    assert checked >= 16 and kept >= 4
+    assert checked >= 8 and kept >= 4
 
 
 def test_pairs_turned_less_than_the_tolerance_are_left_alone():
