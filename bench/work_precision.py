@@ -334,7 +334,7 @@ def method_curve(rows: list[dict], method: str, cost_key: str, err_key: str = "e
     """(log cost, log error) of a method's good rows, sorted by cost."""
     pts = sorted((r[cost_key], max(r[err_key], ERROR_FLOOR)) for r in rows
                  if r["method"] == method and r["status"] == "ok" and r.get(err_key) is not None
-                 and r.get(cost_key) not in (None, ""))
+                 and r.get(cost_key) not in (None, "") and float(r[cost_key]) > 0.0)  # 0: under the clock's tick
     if not pts:
         return None
     c, e = np.log10(np.array(pts)).T
