@@ -1,0 +1,123 @@
+"""Speed against depth in the layered rains of thin boxes (issue 12, item 11).
+
+The two rains of the physics audit (``bench/audit_stacks.py``: ``examples/scenes/mixed_rain.toml``
+and 360 plates of 0.6 x 0.2 x 0.6 m in 10 layers), each run 5 s under the settings that trade
+speed for depth: the turned-pair refresh on (default) or off, 4 or 8 substeps, contacts once per
+step or every substep.  For each: simulated steps per wall second (stepping only; the depth
+probes are not timed) and the deepest body-body penetration, probed every 0.1 s as the audit
+does.  Writes ``thin_rain.csv``/``.json`` and ``thin_rain.png`` (depth against steps/s, the 1 cm
+goal drawn).
+
+    python bench/thin_rain.py            # both rains, every variant (about 6 minutes on 2 cores)
+    python bench/thin_rain.py --quick    # small rains, 1 s, two variants (a smoke run)
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench import common  # noqa: E402
+from bench.audit_cases import pair_depth  # noqa: E402
+
+VARIANTS = {
+    "defaults": {},
+    "turn_refresh 0": {"turn_refresh": 0.0},
+    "8 substeps": {"substeps": 8},
+    "contacts every substep": {"contact_update": "substep"},
+    "8 substeps, every substep": {"substeps": 8, "contact_update": "substep"},
+}
+GOAL = 0.01  # [m] the issue's body-body depth goal
+
+
+def scenes(quick: bool) -> dict:
+    mixed = tomllib.loads((ROOT / "examples" / "scenes" / "mixed_rain.toml").read_text())
+    plates = {"name": "plates", "sim": {"dt": 1 / 60, "substeps": 4, "seed": 3},
+              "terrain": {"kind": "fourier", "terms": 5, "frequency": 0.35, "amplitude": 0.5, "seed": 1},
+              "material": {"restitution": 0.1, "friction": 0.6, "rolling_resistance": 0.1},
+              "layout": [{"type": "grid", "count": [6, 10, 6], "spacing": 0.9, "clearance": 0.5, "shape": "box",
+                          "half_extents": [0.3, 0.1, 0.3], "random_orientation": True, "jitter": 0.5}]}
+    if quick:
+        mixed["layout"][0]["count"] = [3, 4, 3]
+        plates["layout"][0]["count"] = [2, 4, 2]
+    return {"mixed_rain.toml": mixed, "plates": plates}
+
+
+def run_one(scene: dict, changes: dict, seconds: float, probe_every: int = 6) -> dict:
+    from warp_sim.scene import parse_scene
+
+    scene = copy.deepcopy(scene)
+    scene["sim"].update(changes)
+    sim = parse_scene(scene, "<thin_rain>").build("cpu")
+    sim.step(1)  # compile and first pass outside the clock
+    deepest, wall = 0.0, 0.0
+    steps = int(round(seconds / sim.config.dt)) // probe_every * probe_every
+    for _ in range(steps // probe_every):
+        start = time.perf_counter()
+        sim.step(probe_every)
+        wall += time.perf_counter() - start
+        deepest = max(deepest, pair_depth(sim))
+    return {"steps_per_s": steps / wall, "deepest_m": deepest, "substeps": sim.substeps,
+            "bodies": sim.model.body_count, "gate": common.state_gate(sim, depth_slop=1.0)}
+
+
+def chart(rows: list[dict], path: Path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=False)
+    for ax, rain in zip(axes, sorted({r["rain"] for r in rows})):
+        for r in (r for r in rows if r["rain"] == rain):
+            ax.scatter(r["steps_per_s"], 1000 * r["deepest_m"], s=40)
+            ax.annotate(r["variant"], (r["steps_per_s"], 1000 * r["deepest_m"]), fontsize=8,
+                        xytext=(4, 3), textcoords="offset points")
+        ax.axhline(1000 * GOAL, color="#c0392b", lw=1, ls="--", label="1 cm goal")
+        ax.set_title(f"{rain} ({rows[0]['dt_label']})")
+        ax.set_xlabel("steps / s (wall, stepping only)")
+        ax.set_ylabel("deepest body-body penetration [mm]")
+        ax.set_ylim(bottom=0)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--quick", action="store_true", help="small rains, 1 s, two variants (a smoke run)")
+    p.add_argument("--seconds", type=float, default=None, help="simulated seconds per run (default 5, quick 1)")
+    p.add_argument("--out-dir", default=None)
+    args = p.parse_args(argv)
+    if args.seconds is not None and args.seconds <= 0:
+        p.error(f"--seconds must be > 0, got {args.seconds}")
+    out_dir = common.output_dir(args.out_dir, args.quick, "thin_rain")
+    seconds = args.seconds or (1.0 if args.quick else 5.0)
+    variants = {k: VARIANTS[k] for k in ("defaults", "turn_refresh 0")} if args.quick else VARIANTS
+    from tqdm import tqdm
+
+    import warp as wp
+
+    wp.config.quiet = True
+    rows = []
+    jobs = [(rain, scene, name, changes) for rain, scene in scenes(args.quick).items() for name, changes in variants.items()]
+    for rain, scene, name, changes in tqdm(jobs, desc="thin_rain", unit="run"):
+        result = run_one(scene, changes, seconds)
+        rows.append({"rain": rain, "variant": name, "seconds": seconds, "dt_label": "dt 1/60 s", **result})
+        tqdm.write(f"{rain:16s} {name:26s} {result['steps_per_s']:7.2f} steps/s  deepest {1000 * result['deepest_m']:6.1f} mm"
+                   f"  ({result['substeps']} substeps)")
+        common.write_rows("thin_rain", rows, common.machine_info("cpu"), out_dir)
+        chart(rows, out_dir / "thin_rain.png")
+    print(f"wrote {out_dir / 'thin_rain.csv'}, .json and .png")
+
+
+if __name__ == "__main__":
+    main()
