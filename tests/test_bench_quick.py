@@ -25,7 +25,7 @@ def test_full_runs_default_to_results(tmp_path):
     assert common.output_dir(tmp_path, True, "scaling") == tmp_path
 
 
-@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision"])
+@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain"])
 def test_quick_into_results_is_refused(bench):
     import importlib
 
@@ -48,3 +48,19 @@ def test_quick_charts_are_labelled(tmp_path):
     plt.close(fig)
     assert common.QUICK_LABEL in texts
     assert "quick" in common.QUICK_LABEL.lower()
+
+
+def test_thin_rain_quick_writes_rows_and_chart(tmp_path):
+    """The speed-against-depth bench of the thin-box rains, at smoke size: a row per rain and
+    setting, each with a positive speed and a finite, non-negative depth, and the chart."""
+    import json
+    import math
+
+    from bench import thin_rain
+
+    thin_rain.main(["--quick", "--seconds", "0.3", "--out-dir", str(tmp_path)])
+    rows = json.loads((tmp_path / "thin_rain.json").read_text())["rows"]
+    assert {(r["rain"], r["variant"]) for r in rows} == {(rain, v) for rain in ("mixed_rain.toml", "plates")
+                                                         for v in ("defaults", "turn_refresh 0")}
+    assert all(r["steps_per_s"] > 0 and math.isfinite(r["deepest_m"]) and r["deepest_m"] >= 0 for r in rows)
+    assert (tmp_path / "thin_rain.png").stat().st_size > 0
