@@ -244,14 +244,21 @@ def rain_depth(scene: dict, seconds: float, probe_every: int = 6):
     return deepest, sim.max_penetration()
 
 
-def thin_box_rain(quick: bool) -> list[dict]:
-    rows = []
+def thin_box_rains() -> tuple[dict, dict]:
+    """The two layered rains of thin boxes (shared with bench/thin_rain.py): the shipped
+    mixed_rain.toml, and 360 plates of 0.6 x 0.2 x 0.6 m in 10 layers on the same terrain."""
     mixed = tomllib.loads((ROOT / "examples" / "scenes" / "mixed_rain.toml").read_text())
     plates = {"name": "plates", "sim": {"dt": 1 / 60, "substeps": 4, "seed": 3},
               "terrain": {"kind": "fourier", "terms": 5, "frequency": 0.35, "amplitude": 0.5, "seed": 1},
               "material": {"restitution": 0.1, "friction": 0.6, "rolling_resistance": 0.1},
               "layout": [{"type": "grid", "count": [6, 10, 6], "spacing": 0.9, "clearance": 0.5, "shape": "box",
                           "half_extents": [0.3, 0.1, 0.3], "random_orientation": True, "jitter": 0.5}]}
+    return mixed, plates
+
+
+def thin_box_rain(quick: bool) -> list[dict]:
+    rows = []
+    mixed, plates = thin_box_rains()
     if quick:
         mixed["layout"][0]["count"] = [4, 10, 4]
         plates["layout"][0]["count"] = [3, 10, 3]

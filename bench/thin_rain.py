@@ -18,7 +18,6 @@ import argparse
 import copy
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -26,6 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench import common  # noqa: E402
 from bench.audit_cases import pair_depth  # noqa: E402
+from bench.audit_stacks import thin_box_rains  # noqa: E402
 
 VARIANTS = {
     "defaults": {},
@@ -38,12 +38,7 @@ GOAL = 0.01  # [m] the issue's body-body depth goal
 
 
 def scenes(quick: bool) -> dict:
-    mixed = tomllib.loads((ROOT / "examples" / "scenes" / "mixed_rain.toml").read_text())
-    plates = {"name": "plates", "sim": {"dt": 1 / 60, "substeps": 4, "seed": 3},
-              "terrain": {"kind": "fourier", "terms": 5, "frequency": 0.35, "amplitude": 0.5, "seed": 1},
-              "material": {"restitution": 0.1, "friction": 0.6, "rolling_resistance": 0.1},
-              "layout": [{"type": "grid", "count": [6, 10, 6], "spacing": 0.9, "clearance": 0.5, "shape": "box",
-                          "half_extents": [0.3, 0.1, 0.3], "random_orientation": True, "jitter": 0.5}]}
+    mixed, plates = thin_box_rains()
     if quick:
         mixed["layout"][0]["count"] = [3, 4, 3]
         plates["layout"][0]["count"] = [2, 4, 2]
