@@ -1,0 +1,62 @@
+"""The solver's own kernel-argument structs (the shared ones are in warp_sim/kernel_args.py)."""
+
+import warp as wp
+
+from .contact_rows import TerrainRow
+
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class StepSettings:
+    """A substep's constants: SolverSettings and the substep length h."""
+
+    # Settings
+    gravity: wp.vec3
+    h: float
+    integrator: int
+    rotation: int
+    soft: wp.vec3
+    max_push_velocity: float
+    restitution_threshold: float
+    convergence_tolerance: float
+    iterations: int
+    relax_iterations: int
+
+
+@wp.struct
+class SolverBodies:
+    """The solver's per-body and per-slot scratch (SoftStepSolver's arrays of the same names)."""
+
+    # Solver in/out
+    solver_v: wp.array(dtype=wp.vec3)
+    solver_w: wp.array(dtype=wp.vec3)
+    solver_w0: wp.array(dtype=wp.vec3)
+    solver_inv_inertia: wp.array(dtype=wp.mat33)
+    solver_rolling: wp.array(dtype=wp.vec3)
+    solver_shift_v: wp.array(dtype=wp.vec3)
+    solver_shift_w: wp.array(dtype=wp.vec3)
+    solver_ref_pos: wp.array(dtype=wp.vec3)
+    solver_ref_rot: wp.array(dtype=wp.mat33)
+    solver_drift_p: wp.array(dtype=wp.vec3)
+    solver_drift_r: wp.array(dtype=wp.mat33)
+    solver_toi_shift: wp.array(dtype=wp.vec3)
+    terrain_row: wp.array(dtype=TerrainRow)
+    terrain_row_count: wp.array(dtype=wp.int32)
+    impact_normal: wp.array(dtype=float)
+    impact_tangent: wp.array(dtype=wp.vec3)
+
+
+@wp.struct
+class DomainSlabs:
+    """The slabs of solvers/domains.py (collide/pair_pipeline.DomainSchedule's arrays)."""
+
+    # In
+    domain_body_start: wp.array(dtype=wp.int32)
+    domain_body: wp.array(dtype=wp.int32)
+    domain_pair_start: wp.array(dtype=wp.int32)
+    domain_pair: wp.array(dtype=wp.int32)
+    body_domain: wp.array(dtype=wp.int32)
+    body_on_boundary: wp.array(dtype=wp.int32)
+    boundary_body_count: wp.array(dtype=wp.int32)
+    boundary_body: wp.array(dtype=wp.int32)
