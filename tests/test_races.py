@@ -65,3 +65,53 @@ def test_the_check_catches_a_race():
     with pytest.raises(RaceError, match="written by threads 1 and 2"):
         with RaceCheck():
             launch(scatter, 4, [target, out], "cpu")
+
+
+def test_the_check_sees_writes_through_struct_fields(monkeypatch):
+    """Kernels take most arrays inside structs (kernel_args.py): a race on a struct's field is
+    caught like one on an array argument, and SHARED_WRITES exempts a field by its
+    ``parameter.field`` name only."""
+    import warp as wp
+
+    import warp_sim.race_check as race_check
+    from warp_sim.kernel_args import BadSteps
+    from warp_sim.launch import launch
+
+    @wp.struct
+    class Scatter:
+        target: wp.array(dtype=int)
+        out: wp.array(dtype=float)
+
+    @wp.kernel
+    def scatter_fields(tid_offset: int, args: Scatter):
+        t = wp.tid() + tid_offset
+        args.out[args.target[t]] = args.out[args.target[t]] + 1.0
+
+    @wp.kernel
+    def flag_every_thread(tid_offset: int, bad_steps: BadSteps):
+        t = wp.tid() + tid_offset
+        bad_steps.body_bad_step[t] = t
+        bad_steps.bad_count[0] = 1
+
+    args = Scatter()
+    args.target = wp.array([0, 1, 1, 2], dtype=int, device="cpu")
+    args.out = wp.zeros(3, dtype=float, device="cpu")
+    launch(scatter_fields, 4, [args], "cpu")  # outside the check: loads the module
+    with pytest.raises(RaceError, match="of 'args.out' written by threads 1 and 2"):
+        with RaceCheck():
+            launch(scatter_fields, 4, [args], "cpu")
+
+    flags = BadSteps()
+    flags.sim_step = wp.zeros(1, dtype=wp.int32, device="cpu")
+    flags.body_bad_step = wp.zeros(4, dtype=wp.int32, device="cpu")
+    flags.bad_count = wp.zeros(1, dtype=wp.int32, device="cpu")
+    launch(flag_every_thread, 4, [flags], "cpu")
+    flags.bad_count.zero_()  # a thread that stores the value already there is invisible to the check
+    with pytest.raises(RaceError, match="of 'bad_steps.bad_count' written by threads 0 and 1"):
+        with RaceCheck():
+            launch(flag_every_thread, 4, [flags], "cpu")
+    monkeypatch.setitem(race_check.SHARED_WRITES, flag_every_thread.key, {"bad_steps.bad_count"})
+    flags.bad_count.zero_()
+    with RaceCheck() as check:
+        launch(flag_every_thread, 4, [flags], "cpu")
+    assert check.isolated[flag_every_thread.key] == 1

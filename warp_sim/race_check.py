@@ -12,12 +12,14 @@ launch is run
    changed: no element may be changed by two threads, and laying every thread's changes over
    the inputs must give the bytes of 1 (so no thread depended on another's writes).
 
-Arrays that a kernel writes from many threads on purpose are declared in ``SHARED_WRITES`` by
-kernel and parameter name (flags that every writer sets to the same value); they are exempt
-from the two-writer rule and from the comparison in 3.  Launches made with ``wp.launch``
-directly (atomics, one-thread bookkeeping) are not checked: Warp's CPU atomics are not atomic
-across chunks, so those kernels are never split.  An element changed to the value it already
-had is invisible to 3; the orders of 2 still see such a thread if it reads another's output.
+Every array argument is checked, and every array field of a struct argument (kernel_args.py),
+named ``parameter.field``.  Arrays that a kernel writes from many threads on purpose are
+declared in ``SHARED_WRITES`` by kernel and by that name (flags that every writer sets to the
+same value); they are exempt from the two-writer rule and from the comparison in 3.  Launches
+made with ``wp.launch`` directly (atomics, one-thread bookkeeping) are not checked: Warp's CPU
+atomics are not atomic across chunks, so those kernels are never split.  An element changed
+to the value it already had is invisible to 3; the orders of 2 still see such a thread if it
+reads another's output.
 
 Slow (a launch per thread): tiny scenes only.
 """
@@ -62,12 +64,9 @@ class RaceCheck:
 
     def launch(self, kernel, dim: int, inputs: list, device):
         name = kernel.key
-        params = [arg.label for arg in kernel.adj.args]
         shared = SHARED_WRITES.get(name, set())
-        views = {}
-        for index, value in enumerate(inputs):
-            if isinstance(value, wp.array) and value.size > 0:
-                views[index] = _bytes(value.numpy())
+        params, arrays = _arrays([arg.label for arg in kernel.adj.args], inputs)
+        views = {index: _bytes(a.numpy()) for index, a in enumerate(arrays)}
         before = {k: v.copy() for k, v in views.items()}
 
         def run(start: int, count: int):
@@ -123,6 +122,25 @@ class RaceCheck:
                 bad = int(np.flatnonzero((composed[k] != normal[k]).any(axis=1))[0])
                 raise RaceError(f"{name}: element {bad} of {params[k]!r} depends on other threads of the launch "
                                 f"(each thread alone from the same inputs gives another value)")
+
+
+def _arrays(labels: list, inputs: list) -> tuple[list, list]:
+    """The names and arrays of a launch's array arguments, struct fields included, each storage
+    once (restoring one view of an array twice would undo the other's record of a write)."""
+    names, arrays, seen = [], [], set()
+    for label, value in zip(labels, inputs):
+        if isinstance(value, wp.array):
+            found = [(label, value)]
+        elif hasattr(value, "_cls") and hasattr(value._cls, "vars"):  # a wp.struct instance
+            found = [(f"{label}.{field}", getattr(value, field)) for field in value._cls.vars]
+        else:
+            continue
+        for name, a in found:
+            if isinstance(a, wp.array) and a.size > 0 and a.ptr not in seen:
+                seen.add(a.ptr)
+                names.append(name)
+                arrays.append(a)
+    return names, arrays
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
