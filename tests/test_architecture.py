@@ -7,7 +7,10 @@
   convention): every kernel of more than 8 parameters has groups, each group comment uses the
   fixed vocabulary, and arguments under ``# Model`` / ``# State ...`` are named exactly like
   the Model / State fields they are passed (State fields may carry an ``_in`` / ``_out`` suffix
-  when a kernel takes both buffers).
+  when a kernel takes both buffers).  Arrays mostly travel in Warp structs (kernel_args.py): an
+  argument whose type is one of the package's structs is named freely, and the struct's fields
+  follow the same rule, with ``# Contacts ...`` / ``# Solver ...`` fields named like Contacts /
+  SoftStepSolver fields too.
 - No module of the package is longer than 650 lines.
 """
 
@@ -69,19 +72,29 @@ def test_the_import_check_sees_relative_imports(tmp_path):
         fake.unlink()
 
 
-def kernels():
+def decorated(node, decorator: str) -> bool:
+    return any(decorator in ast.unparse(d) for d in node.decorator_list)
+
+
+def definitions(decorator: str):
     for path in modules(PACKAGE):
         source = path.read_text()
         lines = source.split("\n")
         for node in ast.walk(ast.parse(source)):
-            if isinstance(node, ast.FunctionDef) and any("wp.kernel" in ast.unparse(d) for d in node.decorator_list):
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)) and decorated(node, decorator):
                 yield path, node, lines
+
+
+def kernels():
+    yield from definitions("wp.kernel")
 
 
 def field_names():
     import warp as wp
 
     from warp_sim import ModelBuilder
+    from warp_sim.contacts import Contacts
+    from warp_sim.solvers.solver import SoftStepSolver
     from warp_sim.state import State
 
     wp.config.quiet = True
@@ -90,35 +103,114 @@ def field_names():
     model = b.finalize("cpu")
     model_fields = set(vars(model)) | {k for k in dir(type(model)) if not k.startswith("_")}
     state_fields = set(re.findall(r"self\.(\w+)\s*=", inspect.getsource(State)))
-    return model_fields, state_fields
+    contacts_fields = set(re.findall(r"self\.(\w+)\s*=", inspect.getsource(Contacts)))
+    solver_fields = set(re.findall(r"self\.(\w+)\s*=", inspect.getsource(SoftStepSolver)))
+    return {"Model": model_fields, "State": state_fields, "Contacts": contacts_fields,
+            "Solver": solver_fields}
+
+
+def entries(node, lines):
+    """(line, name, annotation) of a kernel's parameters or a struct's fields, and the line the
+    group comments above them end at."""
+    if isinstance(node, ast.ClassDef):
+        fields = [s for s in node.body if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)]
+        return [(f.lineno, f.target.id, ast.unparse(f.annotation)) for f in fields], node.body[-1].end_lineno + 1
+    args = [(a.lineno, a.arg, ast.unparse(a.annotation) if a.annotation else "") for a in node.args.args]
+    return args, node.body[0].lineno
+
+
+def naming_problems(where: str, node, lines, fields: dict, structs: set, contacts: bool = False) -> list[str]:
+    """The grouping and naming rule of the module docstring, for a kernel's parameters or (with
+    ``contacts``: Contacts and Solver groups checked too) a struct's fields."""
+    problems = []
+    named, end = entries(node, lines)
+    by_line = {line: (name, annotation) for line, name, annotation in named}
+    comments = [lines[k - 1].strip() for k in range(node.lineno, end) if lines[k - 1].strip().startswith("#")]
+    if len(named) > 8 and not any(GROUP.match(c) for c in comments):
+        problems.append(f"{where}: {len(named)} parameters and no group comments")
+    group = None
+    for k in range(node.lineno, end):
+        match = GROUP.match(lines[k - 1].strip())
+        if match:
+            group = match.group(1)
+        if k not in by_line or group is None:
+            continue
+        name, annotation = by_line[k]
+        if annotation in structs:
+            continue  # checked field by field (test_struct_fields_are_named_like_their_fields)
+        kind = group.split()[0]
+        if kind in ("Contacts", "Solver") and not contacts:
+            continue
+        if kind in fields and re.sub(r"_(in|out)$", "", name) not in fields[kind]:
+            problems.append(f"{where}: '{name}' under # {group} is no {kind} field")
+    return problems
+
+
+def struct_names() -> set[str]:
+    return {node.name for _, node, _ in definitions("wp.struct")}
 
 
 def test_kernel_arguments_are_grouped_and_named_like_their_fields():
-    model_fields, state_fields = field_names()
-    assert {"body_inv_mass", "body_shape"} <= model_fields and {"body_pos", "body_vel"} <= state_fields
+    fields = field_names()
+    assert {"body_inv_mass", "body_shape"} <= fields["Model"] and {"body_pos", "body_vel"} <= fields["State"]
+    structs = struct_names()
     problems = []
     for path, node, lines in kernels():
-        where = f"{path.relative_to(ROOT)}:{node.lineno} {node.name}"
-        arg_line = {a.lineno: a.arg for a in node.args.args}
-        comments = [lines[k - 1].strip() for k in range(node.lineno, node.body[0].lineno)
-                    if lines[k - 1].strip().startswith("#")]
-        groups = [c for c in comments if GROUP.match(c)]
-        if len(node.args.args) > 8 and not groups:
-            problems.append(f"{where}: {len(node.args.args)} parameters and no group comments")
-        group = None
-        for k in range(node.lineno, node.body[0].lineno):
-            text = lines[k - 1].strip()
-            match = GROUP.match(text)
-            if match:
-                group = match.group(1)
-            if k not in arg_line:
-                continue
-            name = arg_line[k]
-            if group == "Model" and name not in model_fields:
-                problems.append(f"{where}: '{name}' under # Model is no Model field")
-            if group is not None and group.startswith("State") and re.sub(r"_(in|out)$", "", name) not in state_fields:
-                problems.append(f"{where}: '{name}' under # {group} is no State field")
+        problems += naming_problems(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}", node, lines,
+                                    fields, structs)
     assert not problems, "\n".join(problems)
+
+
+def test_struct_fields_are_named_like_their_fields():
+    """Every struct of arrays that a kernel or func takes (an argument group; structs of values
+    such as TerrainRow are data, not groups) groups its fields, and fields under # Model,
+    # State ..., # Contacts ... and # Solver ... are named exactly like the fields they are
+    bound from (kernel_args.bind takes them by name)."""
+    fields = field_names()
+    assert {"terrain_contact_active", "pair_body"} <= fields["Contacts"]
+    used = {ann for _, node, _ in [*kernels(), *definitions("wp.func")] for ann in
+            (ast.unparse(a.annotation) for a in node.args.args if a.annotation)}
+    problems = []
+    for path, node, lines in definitions("wp.struct"):
+        named, end = entries(node, lines)
+        if node.name not in used or not any("wp.array" in annotation for _, _, annotation in named):
+            continue
+        where = f"{path.relative_to(ROOT)}:{node.lineno} {node.name}"
+        if len(named) > 1 and not any(GROUP.match(lines[k - 1].strip()) for k in range(node.lineno, end)):
+            problems.append(f"{where}: fields without a group comment")
+        problems += naming_problems(where, node, lines, fields, set(), contacts=True)
+    assert not problems, "\n".join(problems)
+
+
+def test_the_naming_check_catches_a_misnamed_struct_field():
+    """The rule can fail: a struct field under # Model that is no Model field, and one under
+    # Contacts in that is no Contacts field, are reported; a struct-typed argument is not."""
+    source = """@wp.struct
+class Probe:
+    # Model
+    body_inv_mass: wp.array(dtype=float)
+    inv_mass: wp.array(dtype=float)
+    # Contacts in
+    terrain_contact_active: wp.array(dtype=wp.int32)
+    contact_active: wp.array(dtype=wp.int32)
+
+
+@wp.kernel
+def probe(
+    # Model
+    model: Probe,
+    mass: wp.array(dtype=float),
+):
+    pass
+"""
+    lines = source.split("\n")
+    struct, kernel = [n for n in ast.parse(source).body]
+    fields = field_names()
+    assert naming_problems("probe", struct, lines, fields, set(), contacts=True) == [
+        "probe: 'inv_mass' under # Model is no Model field",
+        "probe: 'contact_active' under # Contacts in is no Contacts field"]
+    assert naming_problems("probe", kernel, lines, fields, {"Probe"}) == [
+        "probe: 'mass' under # Model is no Model field"]
 
 
 def test_no_module_is_overlong():
