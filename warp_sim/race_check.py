@@ -34,9 +34,9 @@ from . import launch as launch_module
 # kernel name -> parameters several threads may write (each writer stores the same value)
 SHARED_WRITES = {
     "color_pick": {"pending", "overflow"},
-    "finalize_bodies": {"bad_count"},
-    "solve_and_integrate": {"bad_count"},
-    "domain_sweep": {"bad_count"},
+    "finalize_bodies": {"bad_steps.bad_count"},
+    "solve_and_integrate": {"bad_steps.bad_count"},
+    "domain_sweep": {"bad_steps.bad_count"},
 }
 
 

@@ -34,9 +34,11 @@ The slabs themselves are cut by warp_sim/schedule/slabs.py, once per collision p
 
 import warp as wp
 
-from .contact_rows import TerrainRow
+from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import impact_begin_body, impact_terrain_body
-from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, solve_one_pair, warm_start_pair_side
+from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, solve_one_pair,
+                         warm_start_pair_side)
+from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
@@ -59,85 +61,26 @@ def domain_sweep(
     prepare: int,
     integrate: int,
     finalize: int,
-    domain_body_start: wp.array(dtype=wp.int32),
-    domain_body: wp.array(dtype=wp.int32),
-    domain_pair_start: wp.array(dtype=wp.int32),
-    domain_pair: wp.array(dtype=wp.int32),
-    body_domain: wp.array(dtype=wp.int32),
-    body_on_boundary: wp.array(dtype=wp.int32),
-    boundary_body_count: wp.array(dtype=wp.int32),
-    boundary_body: wp.array(dtype=wp.int32),
+    # In
+    slabs: DomainSlabs,
     # Model
-    body_shape: wp.array(dtype=wp.int32),
-    body_size: wp.array(dtype=wp.vec3),
-    body_inv_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_inv_inertia: wp.array(dtype=wp.vec3),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_rolling_resistance: wp.array(dtype=float),
-    body_rolling_arm: wp.array(dtype=float),
-    body_sphere_radius: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
+    model: BodyModel,
     # Settings
-    gravity: wp.vec3,
-    h: float,
-    integrator: int,
-    rotation: int,
+    settings: StepSettings,
     reset_reference: int,
     make_rows: int,
     from_impact: int,
-    soft: wp.vec3,
-    max_push_velocity: float,
-    restitution_threshold: float,
-    sim_step: wp.array(dtype=wp.int32),
     # State in
-    body_pos_in: wp.array(dtype=wp.vec3),
-    body_quat_in: wp.array(dtype=wp.quat),
-    body_rot_in: wp.array(dtype=wp.mat33),
-    body_vel_in: wp.array(dtype=wp.vec3),
-    body_angmom_in: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
-    terrain_contact_normal_impulse: wp.array(dtype=float),
-    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
-    pair_body: wp.array(dtype=wp.vec2i),
-    pair_point_count: wp.array(dtype=wp.int32),
-    pair_normal: wp.array(dtype=wp.vec3),
-    pair_point: wp.array(dtype=wp.vec3),
-    pair_depth: wp.array(dtype=float),
-    pair_normal_impulse: wp.array(dtype=float),
-    pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    slots: TerrainContacts,
+    pairs: PairContacts,
     # Solver in/out
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_w0: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_rolling: wp.array(dtype=wp.vec3),
-    solver_shift_v: wp.array(dtype=wp.vec3),
-    solver_shift_w: wp.array(dtype=wp.vec3),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_ref_rot: wp.array(dtype=wp.mat33),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
-    terrain_row: wp.array(dtype=TerrainRow),
-    terrain_row_count: wp.array(dtype=wp.int32),
-    impact_normal: wp.array(dtype=float),
-    impact_tangent: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
     # State out
-    body_pos_out: wp.array(dtype=wp.vec3),
-    body_quat_out: wp.array(dtype=wp.quat),
-    body_rot_out: wp.array(dtype=wp.mat33),
-    body_vel_out: wp.array(dtype=wp.vec3),
-    body_angmom_out: wp.array(dtype=wp.vec3),
+    state_out: BodyState,
     # Out
-    body_bad_step: wp.array(dtype=wp.int32),
-    bad_count: wp.array(dtype=wp.int32),
+    bad_steps: BadSteps,
 ):
     """One sweep of one slab (d < domain_count: its bodies' terrain contacts, then its pairs) or of
     the boundary pairs (d == domain_count), in the pair_solve mode ``mode``; ``reverse`` walks the
@@ -153,81 +96,50 @@ def domain_sweep(
     if d > domain_count:
         # the static bodies (listed after the slabs), before any sweep: the sweeps read their solver
         # state but never write it, and no slab owns them
-        first = domain_body_start[domain_count]
-        for k in range(domain_body_start[domain_count + 1] - first):
-            i = domain_body[first + k]
-            prepare_body(i, body_inv_mass, body_inv_inertia, body_checkpoint_start, body_checkpoint_count, gravity, h,
-                         integrator, rotation, reset_reference, make_rows, from_impact, body_pos_in, body_rot_in, body_vel_in,
-                         body_angmom_in, terrain_contact_active, terrain_contact_point, terrain_contact_normal,
-                         terrain_contact_depth, terrain_contact_normal_impulse, terrain_contact_tangent_impulse,
-                         solver_v, solver_w, solver_inv_inertia, solver_rolling, solver_w0, solver_ref_pos,
-                         solver_ref_rot, solver_drift_p, solver_drift_r, terrain_row, terrain_row_count)
-            integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
-                           body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
-                           solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                           solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
-            finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in, body_vel_in,
-                          body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out, body_vel_out,
-                          body_angmom_out, body_bad_step, bad_count)
+        first = slabs.domain_body_start[domain_count]
+        for k in range(slabs.domain_body_start[domain_count + 1] - first):
+            i = slabs.domain_body[first + k]
+            prepare_body(i, model, settings, reset_reference, make_rows, from_impact, state_in, slots, solver)
+            integrate_body(i, model, settings, state_in, solver, state_out)
+            finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
         return
-    pair_first = domain_pair_start[d]
-    pair_count = domain_pair_start[d + 1] - pair_first
+    pair_first = slabs.domain_pair_start[d]
+    pair_count = slabs.domain_pair_start[d + 1] - pair_first
     if d == domain_count:
         for q in range(pair_count):
-            solve_one_pair(domain_pair[walk(pair_first, pair_count, q, reverse)], mode, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity, restitution_threshold, pair_body,
-                           pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
-                           pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
-                           solver_v, solver_w, solver_toi_shift)
-        for k in range(boundary_body_count[0]):
-            i = boundary_body[k]
+            solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, reverse)], mode, model,
+                           settings, pairs,
+                           solver)
+        for k in range(slabs.boundary_body_count[0]):
+            i = slabs.boundary_body[k]
             if integrate != 0:
-                integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
-                               body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
-                               solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                               solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
+                integrate_body(i, model, settings, state_in, solver, state_out)
             if finalize != 0:
-                finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
-                              body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
-                              body_vel_out, body_angmom_out, body_bad_step, bad_count)
+                finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
         return
-    body_first = domain_body_start[d]
-    body_count = domain_body_start[d + 1] - body_first
+    body_first = slabs.domain_body_start[d]
+    body_count = slabs.domain_body_start[d + 1] - body_first
     if prepare != 0 and mode == MODE_IMPACT:
         for k in range(body_count):
-            impact_begin_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, gravity, h, integrator,
-                              rotation, reset_reference, body_pos_in, body_rot_in, body_vel_in, body_angmom_in,
-                              solver_v, solver_w, solver_inv_inertia, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                              solver_drift_r, solver_toi_shift)
+            impact_begin_body(slabs.domain_body[body_first + k], model, settings, reset_reference, state_in,
+                              solver)
     elif prepare != 0:
         for k in range(body_count):
-            prepare_body(domain_body[body_first + k], body_inv_mass, body_inv_inertia, body_checkpoint_start,
-                         body_checkpoint_count, gravity, h, integrator, rotation, reset_reference, make_rows, from_impact,
-                         body_pos_in,
-                         body_rot_in, body_vel_in, body_angmom_in, terrain_contact_active, terrain_contact_point,
-                         terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
-                         terrain_contact_tangent_impulse, solver_v, solver_w, solver_inv_inertia, solver_rolling,
-                         solver_w0, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r, terrain_row,
-                         terrain_row_count)
+            prepare_body(slabs.domain_body[body_first + k], model, settings, reset_reference, make_rows,
+                         from_impact,
+                         state_in, slots, solver)
         for k in range(pair_count):
-            solve_one_pair(domain_pair[pair_first + k], MODE_WARM_START, body_inv_mass, body_friction,
-                           body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity, restitution_threshold, pair_body,
-                           pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
-                           pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r,
-                           solver_v, solver_w, solver_toi_shift)
+            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver)
         # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
         # boundary impulse applied after the first sweep let a stack split across two slabs sag
         # 27 mm instead of 7)
-        boundary_first = domain_pair_start[domain_count]
-        for q in range(domain_pair_start[domain_count + 1] - boundary_first):
-            p = domain_pair[boundary_first + q]
-            ij = pair_body[p]
+        boundary_first = slabs.domain_pair_start[domain_count]
+        for q in range(slabs.domain_pair_start[domain_count + 1] - boundary_first):
+            p = slabs.domain_pair[boundary_first + q]
+            ij = pairs.pair_body[p]
             for side in range(2):
-                if body_domain[ij[side]] == d:
-                    warm_start_pair_side(p, side, reset_reference, body_inv_mass, body_sphere_radius, body_pos_in,
-                                         pair_body, pair_point_count, pair_normal, pair_point, pair_depth,
-                                         pair_normal_impulse, pair_tangent_impulse, solver_inv_inertia,
-                                         solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w)
+                if slabs.body_domain[ij[side]] == d:
+                    warm_start_pair_side(p, side, reset_reference, model, state_in, pairs, solver)
     terrain = mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
     use_bias = int(mode == MODE_SOLVE)
     if mode == MODE_RELAX_CLOSED:
@@ -237,39 +149,25 @@ def domain_sweep(
         if (part == 0) == (reverse == 0):
             if mode == MODE_IMPACT:
                 for k in range(body_count):
-                    impact_terrain_body(domain_body[walk(body_first, body_count, k, reverse)], body_inv_mass,
-                                        body_friction, body_restitution, body_checkpoint_start, body_checkpoint_count,
-                                        h, gravity, restitution_threshold, terrain_contact_active, terrain_contact_point,
-                                        terrain_contact_normal, terrain_contact_depth, solver_inv_inertia,
-                                        solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w,
-                                        solver_toi_shift, impact_normal, impact_tangent)
+                    impact_terrain_body(slabs.domain_body[walk(body_first, body_count, k, reverse)], model,
+                                        settings,
+                                        slots, solver)
             elif terrain:
                 for k in range(body_count):
-                    sweep_body_terrain(domain_body[walk(body_first, body_count, k, reverse)], body_shape, body_size,
-                                       body_inv_mass, body_friction, body_rolling_resistance, body_checkpoint_start,
-                                       h, use_bias, soft, max_push_velocity, terrain_contact_normal_impulse,
-                                       terrain_contact_tangent_impulse, solver_inv_inertia, solver_ref_pos,
-                                       solver_drift_p, solver_drift_r, solver_v, solver_w, solver_rolling, terrain_row,
-                                       terrain_row_count)
+                    sweep_body_terrain(slabs.domain_body[walk(body_first, body_count, k, reverse)], model,
+                                       settings,
+                                       use_bias, slots, solver)
         else:
             for k in range(pair_count):
-                solve_one_pair(domain_pair[walk(pair_first, pair_count, k, reverse)], mode, body_inv_mass,
-                               body_friction, body_restitution, body_rolling_arm, body_sphere_radius, h, gravity, soft, max_push_velocity,
-                               restitution_threshold,
-                               pair_body, pair_point_count, pair_normal, pair_point, pair_depth, pair_normal_impulse,
-                               pair_tangent_impulse, solver_inv_inertia, solver_ref_pos, solver_drift_p,
-                               solver_drift_r, solver_v, solver_w, solver_toi_shift)
+                solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, k, reverse)], mode, model,
+                               settings,
+                               pairs, solver)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
-            i = domain_body[body_first + k]
-            if body_on_boundary[i] != 0:
+            i = slabs.domain_body[body_first + k]
+            if slabs.body_on_boundary[i] != 0:
                 continue  # a boundary pair moves it after this launch: the boundary thread does it
             if integrate != 0:
-                integrate_body(i, body_shape, body_inv_mass, body_inertia, body_inv_inertia, h, integrator, rotation,
-                               body_pos_in, body_quat_in, body_rot_in, body_angmom_in, solver_v, solver_w, solver_w0,
-                               solver_shift_v, solver_shift_w, solver_ref_pos, solver_ref_rot, solver_drift_p,
-                               solver_drift_r, solver_toi_shift, body_pos_out, body_quat_out, body_rot_out)
+                integrate_body(i, model, settings, state_in, solver, state_out)
             if finalize != 0:
-                finalize_body(i, body_inv_mass, body_inertia, gravity, h, integrator, sim_step, body_rot_in,
-                              body_vel_in, body_angmom_in, solver_v, solver_w, solver_w0, body_pos_out, body_rot_out,
-                              body_vel_out, body_angmom_out, body_bad_step, bad_count)
+                finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)

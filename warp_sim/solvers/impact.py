@@ -60,9 +60,11 @@ to impacts all at its start.
 
 import warp as wp
 
+from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
 from .pair_geometry import pair_point_now
+from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
 
@@ -89,46 +91,33 @@ def body_inv_inertia_world(rot: wp.mat33, body_d: wp.vec3, rotation: int) -> wp.
 def impact_begin_body(
     i: int,
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_inv_inertia: wp.array(dtype=wp.vec3),
+    model: BodyModel,
     # Settings
-    gravity: wp.vec3,
-    h: float,
-    integrator: int,
-    rotation: int,
+    settings: StepSettings,
     reset_reference: int,
     # State in
-    body_pos: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.mat33),
-    body_vel: wp.array(dtype=wp.vec3),
-    body_angmom: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
     # Solver out
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_ref_rot: wp.array(dtype=wp.mat33),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
     """The velocities the impacts act on: those the last solve left, without this substep's
     gravity (prepare_body adds it back, and the contact solve then holds it as a load)."""
-    solver_toi_shift[i] = wp.vec3(0.0)
+    solver.solver_toi_shift[i] = wp.vec3(0.0)
     if reset_reference != 0:
-        solver_ref_pos[i] = body_pos[i]
-        solver_ref_rot[i] = body_rot[i]
-        solver_drift_p[i] = wp.vec3(0.0)
-        solver_drift_r[i] = wp.mat33(0.0)
-    if body_inv_mass[i] == 0.0:
-        solver_v[i] = wp.vec3(0.0)
-        solver_w[i] = wp.vec3(0.0)
-        solver_inv_inertia[i] = wp.mat33(0.0)
+        solver.solver_ref_pos[i] = state_in.body_pos[i]
+        solver.solver_ref_rot[i] = state_in.body_rot[i]
+        solver.solver_drift_p[i] = wp.vec3(0.0)
+        solver.solver_drift_r[i] = wp.mat33(0.0)
+    if model.body_inv_mass[i] == 0.0:
+        solver.solver_v[i] = wp.vec3(0.0)
+        solver.solver_w[i] = wp.vec3(0.0)
+        solver.solver_inv_inertia[i] = wp.mat33(0.0)
         return
-    inv_inertia = body_inv_inertia_world(body_rot[i], body_inv_inertia[i], rotation)
-    solver_inv_inertia[i] = inv_inertia
-    solver_v[i] = body_vel[i] - ((1.0 - pre_kick_fraction(integrator)) * h) * gravity
-    solver_w[i] = inv_inertia * body_angmom[i]
+    inv_inertia = body_inv_inertia_world(state_in.body_rot[i], model.body_inv_inertia[i], settings.rotation)
+    solver.solver_inv_inertia[i] = inv_inertia
+    after_kick = (1.0 - pre_kick_fraction(settings.integrator)) * settings.h
+    solver.solver_v[i] = state_in.body_vel[i] - after_kick * settings.gravity
+    solver.solver_w[i] = inv_inertia * state_in.body_angmom[i]
 
 
 @wp.func
@@ -275,117 +264,87 @@ def impact_terrain(
 def impact_terrain_body(
     i: int,
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
+    model: BodyModel,
     # Settings
-    h: float,
-    gravity: wp.vec3,
-    restitution_threshold: float,
+    settings: StepSettings,
     # Contacts in
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
+    slots: TerrainContacts,
     # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
-    impact_normal: wp.array(dtype=float),
-    impact_tangent: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
-    inv_mass = body_inv_mass[i]
-    e = body_restitution[i]
+    inv_mass = model.body_inv_mass[i]
+    e = model.body_restitution[i]
     if inv_mass == 0.0 or e == 0.0:
         return
-    hit = impact_terrain(body_checkpoint_start[i], body_checkpoint_count[i], solver_ref_pos[i], solver_v[i],
-                        solver_w[i], inv_mass, solver_inv_inertia[i], solver_drift_p[i], solver_drift_r[i], e,
-                        body_friction[i], h, gravity, restitution_threshold, terrain_contact_active, terrain_contact_point,
-                        terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
-    solver_w[i] = hit.w
-    solver_v[i] = hit.v
-    solver_toi_shift[i] = solver_toi_shift[i] + hit.shift
+    hit = impact_terrain(model.body_checkpoint_start[i], model.body_checkpoint_count[i], solver.solver_ref_pos[i],
+                         solver.solver_v[i], solver.solver_w[i], inv_mass, solver.solver_inv_inertia[i],
+                         solver.solver_drift_p[i], solver.solver_drift_r[i], e, model.body_friction[i], settings.h,
+                         settings.gravity, settings.restitution_threshold, slots.terrain_contact_active,
+                         slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                         solver.impact_normal, solver.impact_tangent)
+    solver.solver_w[i] = hit.w
+    solver.solver_v[i] = hit.v
+    solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + hit.shift
 
 
 @wp.func
 def impact_pair(
     p: int,
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_sphere_radius: wp.array(dtype=float),
+    model: BodyModel,
     # Settings
-    h: float,
-    gravity: wp.vec3,
-    restitution_threshold: float,
+    settings: StepSettings,
     # Contacts in
-    pair_body: wp.array(dtype=wp.vec2i),
-    pair_point_count: wp.array(dtype=wp.int32),
-    pair_normal: wp.array(dtype=wp.vec3),
-    pair_point: wp.array(dtype=wp.vec3),
-    pair_depth: wp.array(dtype=float),
+    pairs: PairContacts,
     # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
     """The impact of pair p (its manifold's points, at the current pose: pair_geometry.py; the
     algebra of pair_solve.py, impulse +P on i)."""
-    ij = pair_body[p]
+    ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
-    e = wp.max(body_restitution[i], body_restitution[j])
-    count = pair_point_count[p]
+    e = wp.max(model.body_restitution[i], model.body_restitution[j])
+    count = pairs.pair_point_count[p]
     if e == 0.0 or count == 0:
         return
-    inv_mi = body_inv_mass[i]
-    inv_mj = body_inv_mass[j]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
     if inv_mi == 0.0 and inv_mj == 0.0:
         return
-    xi = solver_ref_pos[i]
-    xj = solver_ref_pos[j]
-    dpi = solver_drift_p[i]
-    dpj = solver_drift_p[j]
-    dri = solver_drift_r[i]
-    drj = solver_drift_r[j]
-    radius_i = body_sphere_radius[i]
-    radius_j = body_sphere_radius[j]
-    inv_ii = solver_inv_inertia[i]
-    inv_ij = solver_inv_inertia[j]
-    vi = solver_v[i]
-    wi = solver_w[i]
-    vj = solver_v[j]
-    wj = solver_w[j]
+    xi = solver.solver_ref_pos[i]
+    xj = solver.solver_ref_pos[j]
+    dpi = solver.solver_drift_p[i]
+    dpj = solver.solver_drift_p[j]
+    dri = solver.solver_drift_r[i]
+    drj = solver.solver_drift_r[j]
+    radius_i = model.body_sphere_radius[i]
+    radius_j = model.body_sphere_radius[j]
+    inv_ii = solver.solver_inv_inertia[i]
+    inv_ij = solver.solver_inv_inertia[j]
+    vi = solver.solver_v[i]
+    wi = solver.solver_w[i]
+    vj = solver.solver_v[j]
+    wj = solver.solver_w[j]
     # the points' geometry at the current pose, found once: rows k of normal, arm_i, arm_j
     normal = wp.mat44(0.0)
     arm_i = wp.mat44(0.0)
     arm_j = wp.mat44(0.0)
     acc = wp.vec4(NOT_ENGAGED)
     hit = int(0)
-    toi = h
+    toi = settings.h
     for k in range(count):
-        now = pair_point_now(pair_normal[p], pair_point[p * POINTS + k], pair_depth[p * POINTS + k], xi, xj, dpi, dpj,
-                             dri, drj, radius_i, radius_j, inv_mi, inv_mj)
+        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
+                             xi, xj, dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
         for axis in range(3):
             normal[k, axis] = now.normal[axis]
             arm_i[k, axis] = now.arm_i[axis]
             arm_j[k, axis] = now.arm_j[axis]
         vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
-        if engaged(now.separation, vn, h):
+        if engaged(now.separation, vn, settings.h):
             acc[k] = 0.0
             toi = time_to_contact(now.separation, vn, toi)
-            if vn < -restitution_threshold:
+            if vn < -settings.restitution_threshold:
                 hit = 1
     if hit == 0:
         return
@@ -396,8 +355,8 @@ def impact_pair(
         # impact (both equally, so momentum and angular momentum hold exactly)
         toi = 0.0
     # the impact acts at t*, on the velocities gravity has grown by then (dynamic bodies only)
-    gi = wp.where(inv_mi > 0.0, toi, 0.0) * gravity
-    gj = wp.where(inv_mj > 0.0, toi, 0.0) * gravity
+    gi = wp.where(inv_mi > 0.0, toi, 0.0) * settings.gravity
+    gj = wp.where(inv_mj > 0.0, toi, 0.0) * settings.gravity
     vi = vi + gi
     vj = vj + gj
     vi_in = vi
@@ -427,7 +386,7 @@ def impact_pair(
             wi = wi + inv_ii * (wp.cross(row3(arm_i, k), n) * bounce)
             vj = vj - (inv_mj * bounce) * n
             wj = wj - inv_ij * (wp.cross(row3(arm_j, k), n) * bounce)
-    mu = wp.sqrt(body_friction[i] * body_friction[j])
+    mu = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     if mu > 0.0:
         tangent = wp.mat44(0.0)  # rows: the accumulated tangential impulse of each point (x, y, z, -)
         for _it in range(2):
@@ -457,80 +416,45 @@ def impact_pair(
                     wj = wj - inv_ij * wp.cross(rj, change)
     # only dynamic bodies are written: a static body may sit in many pairs of one colour
     if inv_mi > 0.0:
-        solver_v[i] = vi - gi
-        solver_w[i] = wi
-        solver_toi_shift[i] = wp.where(early, wp.vec3(0.0), solver_toi_shift[i] + toi * (vi_in - vi))
+        solver.solver_v[i] = vi - gi
+        solver.solver_w[i] = wi
+        solver.solver_toi_shift[i] = wp.where(early, wp.vec3(0.0),
+                                              solver.solver_toi_shift[i] + toi * (vi_in - vi))
     if inv_mj > 0.0:
-        solver_v[j] = vj - gj
-        solver_w[j] = wj
-        solver_toi_shift[j] = wp.where(early, wp.vec3(0.0), solver_toi_shift[j] + toi * (vj_in - vj))
+        solver.solver_v[j] = vj - gj
+        solver.solver_w[j] = wj
+        solver.solver_toi_shift[j] = wp.where(early, wp.vec3(0.0),
+                                              solver.solver_toi_shift[j] + toi * (vj_in - vj))
 
 
 @wp.kernel
 def impact_begin(
     tid_offset: int,
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_inv_inertia: wp.array(dtype=wp.vec3),
+    model: BodyModel,
     # Settings
-    gravity: wp.vec3,
-    h: float,
-    integrator: int,
-    rotation: int,
+    settings: StepSettings,
     reset_reference: int,
     # State in
-    body_pos: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.mat33),
-    body_vel: wp.array(dtype=wp.vec3),
-    body_angmom: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
     # Solver out
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_ref_rot: wp.array(dtype=wp.mat33),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
-    impact_begin_body(wp.tid() + tid_offset, body_inv_mass, body_inv_inertia, gravity, h, integrator, rotation,
-                      reset_reference, body_pos, body_rot, body_vel, body_angmom, solver_v, solver_w,
-                      solver_inv_inertia, solver_ref_pos, solver_ref_rot, solver_drift_p, solver_drift_r,
-                      solver_toi_shift)
+    # a twin of impact_begin_body (domain_sweep calls it too): the colour schedule launches it per body
+    impact_begin_body(wp.tid() + tid_offset, model, settings, reset_reference, state_in, solver)
 
 
 @wp.kernel
 def terrain_impact(
     tid_offset: int,
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
+    model: BodyModel,
     # Settings
-    h: float,
-    gravity: wp.vec3,
-    restitution_threshold: float,
+    settings: StepSettings,
     # Contacts in
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
+    slots: TerrainContacts,
     # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
-    # Scratch
-    impact_normal: wp.array(dtype=float),
-    impact_tangent: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
-    impact_terrain_body(wp.tid() + tid_offset, body_inv_mass, body_friction, body_restitution, body_checkpoint_start,
-                        body_checkpoint_count, h, gravity, restitution_threshold, terrain_contact_active,
-                        terrain_contact_point, terrain_contact_normal, terrain_contact_depth, solver_inv_inertia,
-                        solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w, solver_toi_shift,
-                        impact_normal, impact_tangent)
+    # a twin of impact_terrain_body (domain_sweep calls it too): the colour schedule launches it per body
+    impact_terrain_body(wp.tid() + tid_offset, model, settings, slots, solver)

@@ -7,9 +7,11 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 
 import warp as wp
 
+from ..kernel_args import BodyModel, BodyState, PairContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .pair_geometry import pair_point_now
+from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
 
@@ -60,81 +62,61 @@ def normal_mass_inverse(n: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv
 def solve_one_pair(
     p: int,
     mode: int,
-    body_inv_mass: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_rolling_arm: wp.array(dtype=float),
-    body_sphere_radius: wp.array(dtype=float),
-    h: float,
-    gravity: wp.vec3,
-    soft: wp.vec3,
-    max_push_velocity: float,
-    restitution_threshold: float,
-    pair_body: wp.array(dtype=wp.vec2i),
-    pair_point_count: wp.array(dtype=wp.int32),
-    pair_normal: wp.array(dtype=wp.vec3),
-    pair_point: wp.array(dtype=wp.vec3),
-    pair_depth: wp.array(dtype=float),
-    pair_normal_impulse: wp.array(dtype=float),
-    pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
 ):
     if mode == MODE_IMPACT:
-        impact_pair(p, body_inv_mass, body_friction, body_restitution, body_sphere_radius, h, gravity,
-                    restitution_threshold,
-                    pair_body,
-                    pair_point_count, pair_normal, pair_point, pair_depth, solver_inv_inertia, solver_ref_pos,
-                    solver_drift_p, solver_drift_r, solver_v, solver_w, solver_toi_shift)
+        impact_pair(p, model, settings, pairs, solver)
         return
-    ij = pair_body[p]
+    ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
-    n = pair_normal[p]
-    inv_mi = body_inv_mass[i]
-    inv_mj = body_inv_mass[j]
-    inv_ii = solver_inv_inertia[i]
-    inv_ij = solver_inv_inertia[j]
-    xi = solver_ref_pos[i]
-    xj = solver_ref_pos[j]
-    drift_pi = solver_drift_p[i]
-    drift_pj = solver_drift_p[j]
-    drift_ri = solver_drift_r[i]
-    drift_rj = solver_drift_r[j]
+    n = pairs.pair_normal[p]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    inv_ii = solver.solver_inv_inertia[i]
+    inv_ij = solver.solver_inv_inertia[j]
+    xi = solver.solver_ref_pos[i]
+    xj = solver.solver_ref_pos[j]
+    drift_pi = solver.solver_drift_p[i]
+    drift_pj = solver.solver_drift_p[j]
+    drift_ri = solver.solver_drift_r[i]
+    drift_rj = solver.solver_drift_r[j]
     vel = PairVelocity()
-    vel.vi = solver_v[i]
-    vel.wi = solver_w[i]
-    vel.vj = solver_v[j]
-    vel.wj = solver_w[j]
-    friction = wp.sqrt(body_friction[i] * body_friction[j])
-    count = pair_point_count[p]
+    vel.vi = solver.solver_v[i]
+    vel.wi = solver.solver_w[i]
+    vel.vj = solver.solver_v[j]
+    vel.wj = solver.solver_w[j]
+    friction = wp.sqrt(model.body_friction[i] * model.body_friction[j])
+    count = pairs.pair_point_count[p]
     # rolling resistance of a sphere in the pair (terrain contacts: soft_step.solve_rolling); a
     # sphere's pair has one point, so the pair's second slot keeps its accumulated angular impulse
-    rolling_arm = wp.max(body_rolling_arm[i], body_rolling_arm[j])
+    rolling_arm = wp.max(model.body_rolling_arm[i], model.body_rolling_arm[j])
     if mode == MODE_WARM_START and count == 1:
-        pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
+        pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
     normal_total = float(0.0)
 
-    radius_i = body_sphere_radius[i]
-    radius_j = body_sphere_radius[j]
+    radius_i = model.body_sphere_radius[i]
+    radius_j = model.body_sphere_radius[j]
 
     for k in range(count):
         slot = p * POINTS + k
         # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
-        now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], xi, xj, drift_pi, drift_pj,
-                             drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
+        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], xi, xj,
+                             drift_pi, drift_pj, drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
         n = now.normal
         ri = now.arm_i
         rj = now.arm_j
-        acc = pair_normal_impulse[slot]
+        acc = pairs.pair_normal_impulse[slot]
         if mode == MODE_WARM_START:
-            vel = apply_pair_impulse(vel, acc * n + pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj, inv_ii,
-                                     inv_ij)
+            vel = apply_pair_impulse(vel, acc * n + pairs.pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj,
+                                     inv_ii, inv_ij)
         else:
             separation = now.separation
             # Non-penetration
@@ -144,13 +126,13 @@ def solve_one_pair(
             if separation > 0.0:
                 if mode == MODE_RELAX_CLOSED:
                     continue
-                bias = separation / h
+                bias = separation / settings.h
             elif mode == MODE_SOLVE:
-                bias = wp.max(soft[0] * separation, -max_push_velocity)
-                mass_scale = soft[1]
-                impulse_scale = soft[2]
+                bias = wp.max(settings.soft[0] * separation, -settings.max_push_velocity)
+                mass_scale = settings.soft[1]
+                impulse_scale = settings.soft[2]
             vn = wp.dot(relative_velocity(vel, ri, rj), n)
-            old_t = pair_tangent_impulse[slot]
+            old_t = pairs.pair_tangent_impulse[slot]
             if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
                 # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no
                 # old friction to remove; the point would change nothing (contact_rows.py)
@@ -158,7 +140,7 @@ def solve_one_pair(
             k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
             lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
             new_acc = wp.max(acc + lam, 0.0)
-            pair_normal_impulse[slot] = new_acc
+            pairs.pair_normal_impulse[slot] = new_acc
             vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
             # Friction: accumulated tangential impulse clamped to the Coulomb disc
             vr = relative_velocity(vel, ri, rj)
@@ -174,13 +156,13 @@ def solve_one_pair(
             mag = wp.length(new_t)
             if mag > limit:
                 new_t = new_t * (limit / mag)
-            pair_tangent_impulse[slot] = new_t
+            pairs.pair_tangent_impulse[slot] = new_t
             vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
             normal_total = normal_total + new_acc
 
     if rolling_arm > 0.0 and count == 1 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
         # against the relative spin, with the mass of its axis, clamped to c_r r J_n
-        acc_roll = pair_tangent_impulse[p * POINTS + 1]
+        acc_roll = pairs.pair_tangent_impulse[p * POINTS + 1]
         spin = vel.wi - vel.wj
         speed2 = wp.dot(spin, spin)
         new_roll = acc_roll
@@ -190,17 +172,17 @@ def solve_one_pair(
         mag2 = wp.dot(new_roll, new_roll)
         if mag2 > limit * limit:
             new_roll = new_roll * (limit / wp.sqrt(mag2))
-        pair_tangent_impulse[p * POINTS + 1] = new_roll
+        pairs.pair_tangent_impulse[p * POINTS + 1] = new_roll
         vel.wi = vel.wi + inv_ii * (new_roll - acc_roll)
         vel.wj = vel.wj - inv_ij * (new_roll - acc_roll)
 
     # Only dynamic bodies are written: a static body may sit in many pairs of one colour.
     if inv_mi > 0.0:
-        solver_v[i] = vel.vi
-        solver_w[i] = vel.wi
+        solver.solver_v[i] = vel.vi
+        solver.solver_w[i] = vel.wi
     if inv_mj > 0.0:
-        solver_v[j] = vel.vj
-        solver_w[j] = vel.wj
+        solver.solver_v[j] = vel.vj
+        solver.solver_w[j] = vel.wj
 
 
 @wp.func
@@ -208,22 +190,14 @@ def warm_start_pair_side(
     p: int,
     side: int,
     reset_reference: int,
-    body_inv_mass: wp.array(dtype=float),
-    body_sphere_radius: wp.array(dtype=float),
-    body_pos: wp.array(dtype=wp.vec3),
-    pair_body: wp.array(dtype=wp.vec2i),
-    pair_point_count: wp.array(dtype=wp.int32),
-    pair_normal: wp.array(dtype=wp.vec3),
-    pair_point: wp.array(dtype=wp.vec3),
-    pair_depth: wp.array(dtype=float),
-    pair_normal_impulse: wp.array(dtype=float),
-    pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
+    # Model
+    model: BodyModel,
+    # State in
+    state_in: BodyState,
+    # Contacts in/out
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
 ):
     """Pair p's stored impulses applied to one of its bodies (side 0: body i gets +P; side 1: body j
     gets -P).  A warm start touches each body with its own arm and inverse mass only, so the two
@@ -231,41 +205,41 @@ def warm_start_pair_side(
     (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair.  The other body's reference
     pose is being reset by its own thread when ``reset_reference`` is set: it is then read from
     body_pos (drift zero), as that thread will write it."""
-    ij = pair_body[p]
+    ij = pairs.pair_body[p]
     b = ij[side]
-    inv_mass = body_inv_mass[b]
+    inv_mass = model.body_inv_mass[b]
     if inv_mass == 0.0:
         return
     i = ij[0]
     j = ij[1]
     sign = wp.where(side == 0, 1.0, -1.0)
-    inv_inertia = solver_inv_inertia[b]
-    v = solver_v[b]
-    w = solver_w[b]
-    x_i = body_pos[i]
-    x_j = body_pos[j]
+    inv_inertia = solver.solver_inv_inertia[b]
+    v = solver.solver_v[b]
+    w = solver.solver_w[b]
+    x_i = state_in.body_pos[i]
+    x_j = state_in.body_pos[j]
     drift_pi = wp.vec3(0.0)
     drift_pj = wp.vec3(0.0)
     drift_ri = wp.mat33(0.0)
     drift_rj = wp.mat33(0.0)
     if reset_reference == 0:
-        x_i = solver_ref_pos[i]
-        x_j = solver_ref_pos[j]
-        drift_pi = solver_drift_p[i]
-        drift_pj = solver_drift_p[j]
-        drift_ri = solver_drift_r[i]
-        drift_rj = solver_drift_r[j]
-    for k in range(pair_point_count[p]):
+        x_i = solver.solver_ref_pos[i]
+        x_j = solver.solver_ref_pos[j]
+        drift_pi = solver.solver_drift_p[i]
+        drift_pj = solver.solver_drift_p[j]
+        drift_ri = solver.solver_drift_r[i]
+        drift_rj = solver.solver_drift_r[j]
+    for k in range(pairs.pair_point_count[p]):
         slot = p * POINTS + k
-        now = pair_point_now(pair_normal[p], pair_point[slot], pair_depth[slot], x_i, x_j, drift_pi, drift_pj,
-                             drift_ri, drift_rj, body_sphere_radius[i], body_sphere_radius[j],
-                             body_inv_mass[i], body_inv_mass[j])
+        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], x_i, x_j,
+                             drift_pi, drift_pj, drift_ri, drift_rj, model.body_sphere_radius[i],
+                             model.body_sphere_radius[j], model.body_inv_mass[i], model.body_inv_mass[j])
         arm = wp.where(side == 0, now.arm_i, now.arm_j)
-        impulse = sign * (pair_normal_impulse[slot] * now.normal + pair_tangent_impulse[slot])
+        impulse = sign * (pairs.pair_normal_impulse[slot] * now.normal + pairs.pair_tangent_impulse[slot])
         v = v + inv_mass * impulse
         w = w + inv_inertia * wp.cross(arm, impulse)
-    solver_v[b] = v
-    solver_w[b] = w
+    solver.solver_v[b] = v
+    solver.solver_w[b] = w
 
 
 @wp.kernel
@@ -276,39 +250,14 @@ def pair_pass(
     color_start: wp.array(dtype=wp.int32),
     color_pairs_sorted: wp.array(dtype=wp.int32),
     # Model
-    body_inv_mass: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_restitution: wp.array(dtype=float),
-    body_rolling_arm: wp.array(dtype=float),
-    body_sphere_radius: wp.array(dtype=float),
+    model: BodyModel,
     # Settings
-    h: float,
-    gravity: wp.vec3,
-    soft: wp.vec3,
-    max_push_velocity: float,
-    restitution_threshold: float,
+    settings: StepSettings,
     # Contacts in/out
-    pair_body: wp.array(dtype=wp.vec2i),
-    pair_point_count: wp.array(dtype=wp.int32),
-    pair_normal: wp.array(dtype=wp.vec3),
-    pair_point: wp.array(dtype=wp.vec3),
-    pair_depth: wp.array(dtype=float),
-    pair_normal_impulse: wp.array(dtype=float),
-    pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    pairs: PairContacts,
     # Solver in/out
-    solver_inv_inertia: wp.array(dtype=wp.mat33),
-    solver_ref_pos: wp.array(dtype=wp.vec3),
-    solver_drift_p: wp.array(dtype=wp.vec3),
-    solver_drift_r: wp.array(dtype=wp.mat33),
-    solver_v: wp.array(dtype=wp.vec3),
-    solver_w: wp.array(dtype=wp.vec3),
-    solver_toi_shift: wp.array(dtype=wp.vec3),
+    solver: SolverBodies,
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, body_inv_mass, body_friction, body_restitution,
-                       body_rolling_arm, body_sphere_radius, h, gravity, soft,
-                       max_push_velocity, restitution_threshold, pair_body, pair_point_count,
-                       pair_normal, pair_point, pair_depth, pair_normal_impulse, pair_tangent_impulse,
-                       solver_inv_inertia, solver_ref_pos, solver_drift_p, solver_drift_r, solver_v, solver_w,
-                       solver_toi_shift)
+        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver)

@@ -42,9 +42,11 @@ import math
 import warp as wp
 
 from ..column_sag import contact_hertz as contact_frequency
+from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
 from .impact import impact_terrain
+from .solver_args import StepSettings
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
@@ -266,149 +268,119 @@ def sweep_converged(before: BodyVelocity, after: BodyVelocity, reach: float, tol
 def solve_and_integrate(
     tid_offset: int,
     # Model
-    body_shape: wp.array(dtype=wp.int32),
-    body_size: wp.array(dtype=wp.vec3),
-    body_inv_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_inv_inertia: wp.array(dtype=wp.vec3),
-    body_restitution: wp.array(dtype=float),
-    body_friction: wp.array(dtype=float),
-    body_rolling_resistance: wp.array(dtype=float),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
+    model: BodyModel,
     # Settings
-    gravity: wp.vec3,
-    h: float,
-    integrator: int,
-    rotation: int,
-    iterations: int,
-    relax_iterations: int,
-    soft: wp.vec3,
-    max_push_velocity: float,
-    restitution_threshold: float,
-    convergence_tolerance: float,
-    sim_step: wp.array(dtype=wp.int32),
+    settings: StepSettings,
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
-    terrain_contact_normal_impulse: wp.array(dtype=float),
-    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    slots: TerrainContacts,
     # Scratch
     impact_normal: wp.array(dtype=float),
     impact_tangent: wp.array(dtype=wp.vec3),
     # State in
-    body_pos_in: wp.array(dtype=wp.vec3),
-    body_quat_in: wp.array(dtype=wp.quat),
-    body_rot_in: wp.array(dtype=wp.mat33),
-    body_vel_in: wp.array(dtype=wp.vec3),
-    body_angmom_in: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
     # State out
-    body_pos_out: wp.array(dtype=wp.vec3),
-    body_quat_out: wp.array(dtype=wp.quat),
-    body_rot_out: wp.array(dtype=wp.mat33),
-    body_vel_out: wp.array(dtype=wp.vec3),
-    body_angmom_out: wp.array(dtype=wp.vec3),
+    state_out: BodyState,
     # Out
-    body_bad_step: wp.array(dtype=wp.int32),
-    bad_count: wp.array(dtype=wp.int32),
+    bad_steps: BadSteps,
 ):
     i = wp.tid() + tid_offset
-    x = body_pos_in[i]
-    q = body_quat_in[i]
-    rot = body_rot_in[i]
-    angmom = body_angmom_in[i]
-    inv_mass = body_inv_mass[i]
+    x = state_in.body_pos[i]
+    q = state_in.body_quat[i]
+    rot = state_in.body_rot[i]
+    angmom = state_in.body_angmom[i]
+    inv_mass = model.body_inv_mass[i]
     if inv_mass == 0.0:
-        body_pos_out[i] = x
-        body_quat_out[i] = q
-        body_rot_out[i] = rot
-        body_vel_out[i] = body_vel_in[i]
-        body_angmom_out[i] = angmom
+        state_out.body_pos[i] = x
+        state_out.body_quat[i] = q
+        state_out.body_rot[i] = rot
+        state_out.body_vel[i] = state_in.body_vel[i]
+        state_out.body_angmom[i] = angmom
         return
 
-    alpha = pre_kick_fraction(integrator)
-    inv_inertia = world_inv_inertia(rot, body_inv_inertia[i])
+    alpha = pre_kick_fraction(settings.integrator)
+    inv_inertia = world_inv_inertia(rot, model.body_inv_inertia[i])
     vel = BodyVelocity()
-    vel.v = body_vel_in[i] + (alpha * h) * gravity
+    vel.v = state_in.body_vel[i] + (alpha * settings.h) * settings.gravity
     omega_free = inv_inertia * angmom
     vel.w = omega_free
     vel.rolling_impulse = wp.vec3(0.0)
 
-    start = body_checkpoint_start[i]
-    count = body_checkpoint_count[i]
-    friction = body_friction[i]
+    start = model.body_checkpoint_start[i]
+    count = model.body_checkpoint_count[i]
+    friction = model.body_friction[i]
     rolling = float(0.0)
-    if body_shape[i] == SHAPE_SPHERE:
-        rolling = body_rolling_resistance[i] * body_size[i][0]
+    if model.body_shape[i] == SHAPE_SPHERE:
+        rolling = model.body_rolling_resistance[i] * model.body_size[i][0]
 
     touching = int(0)
     for slot in range(start, start + count):
-        touching = touching | terrain_contact_active[slot]
+        touching = touching | slots.terrain_contact_active[slot]
     zero = wp.vec3(0.0)
     no_turn = wp.mat33(0.0)
     toi_shift = wp.vec3(0.0)
-    e = body_restitution[i]
+    e = model.body_restitution[i]
     if touching != 0 and e > 0.0:
         # impacts act on the velocity the last solve left, without this substep's gravity
-        v_last = body_vel_in[i] - ((1.0 - alpha) * h) * gravity
+        v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
         hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
-                             h, gravity, restitution_threshold, terrain_contact_active, terrain_contact_point,
-                             terrain_contact_normal, terrain_contact_depth, impact_normal, impact_tangent)
-        vel.v = hit.v + h * gravity
+                             settings.h, settings.gravity, settings.restitution_threshold,
+                             slots.terrain_contact_active, slots.terrain_contact_point,
+                             slots.terrain_contact_normal, slots.terrain_contact_depth, impact_normal,
+                             impact_tangent)
+        vel.v = hit.v + settings.h * settings.gravity
         vel.w = hit.w
         toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
 
     # Warm start
-    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, terrain_contact_active,
-                             terrain_contact_point, terrain_contact_normal, terrain_contact_normal_impulse,
-                             terrain_contact_tangent_impulse)
+    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, slots.terrain_contact_active,
+                             slots.terrain_contact_point, slots.terrain_contact_normal,
+                             slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
 
-    reach = body_size[i][0]
-    if body_shape[i] != SHAPE_SPHERE:
-        reach = wp.length(body_size[i])
+    reach = model.body_size[i][0]
+    if model.body_shape[i] != SHAPE_SPHERE:
+        reach = wp.length(model.body_size[i])
     if touching != 0:
-        for _it in range(iterations):
+        for _it in range(settings.iterations):
             before = vel
-            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, 1,
-                                soft, max_push_velocity, zero, no_turn, terrain_contact_active, terrain_contact_point,
-                                terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
-                                terrain_contact_tangent_impulse)
-            if sweep_converged(before, vel, reach, convergence_tolerance):
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, 1,
+                        settings.soft, settings.max_push_velocity, zero, no_turn, slots.terrain_contact_active,
+                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
                 break
 
     # Drift: positions and orientation move with the solved velocity
     new_angmom = angmom
     if touching != 0:
-        new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
-    step = h * vel.v + toi_shift
+        new_angmom = angmom + world_inertia(rot, model.body_inertia[i]) * (vel.w - omega_free)
+    step = settings.h * vel.v + toi_shift
     x_new = x + step
-    q_new, rot_new = integrate_rotation(q, rot, body_inv_inertia[i], new_angmom, h, integrator, rotation)
+    q_new, rot_new = integrate_rotation(q, rot, model.body_inv_inertia[i], new_angmom, settings.h,
+                                        settings.integrator, settings.rotation)
 
     if touching != 0:
         relax_bias = wp.where(e > 0.0, -1, 0)
         shift_v = step
-        shift_r = drift_rotation(body_shape[i], rot_new, rot)
-        for _it in range(relax_iterations):
+        shift_r = drift_rotation(model.body_shape[i], rot_new, rot)
+        for _it in range(settings.relax_iterations):
             before = vel
-            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, h, relax_bias,
-                                soft, max_push_velocity, shift_v, shift_r, terrain_contact_active, terrain_contact_point,
-                                terrain_contact_normal, terrain_contact_depth, terrain_contact_normal_impulse,
-                                terrain_contact_tangent_impulse)
-            if sweep_converged(before, vel, reach, convergence_tolerance):
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,
+                        settings.soft, settings.max_push_velocity, shift_v, shift_r, slots.terrain_contact_active,
+                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
                 break
-        new_angmom = angmom + world_inertia(rot, body_inertia[i]) * (vel.w - omega_free)
+        new_angmom = angmom + world_inertia(rot, model.body_inertia[i]) * (vel.w - omega_free)
 
-    v_new = vel.v + ((1.0 - alpha) * h) * gravity
-    body_pos_out[i] = x_new
-    body_quat_out[i] = q_new
-    body_rot_out[i] = rot_new
-    body_vel_out[i] = v_new
-    body_angmom_out[i] = new_angmom
+    v_new = vel.v + ((1.0 - alpha) * settings.h) * settings.gravity
+    state_out.body_pos[i] = x_new
+    state_out.body_quat[i] = q_new
+    state_out.body_rot[i] = rot_new
+    state_out.body_vel[i] = v_new
+    state_out.body_angmom[i] = new_angmom
 
     total = wp.dot(x_new, x_new) + wp.dot(v_new, v_new) + wp.dot(new_angmom, new_angmom) + wp.ddot(rot_new, rot_new)
     if not wp.isfinite(total):
-        if body_bad_step[i] < 0:
-            body_bad_step[i] = sim_step[0]
-            wp.atomic_add(bad_count, 0, 1)
+        if bad_steps.body_bad_step[i] < 0:
+            bad_steps.body_bad_step[i] = bad_steps.sim_step[0]
+            wp.atomic_add(bad_steps.bad_count, 0, 1)

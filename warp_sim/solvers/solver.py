@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import warp as wp
 
+from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts, bind
 from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
@@ -23,6 +25,7 @@ from .impact import impact_begin, terrain_impact
 from .pair_solve import MODE_IMPACT, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import soft_coefficients, solve_and_integrate
+from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
 
@@ -105,11 +108,44 @@ class SoftStepSolver:
         returns the colour sizes to solve with.
         """
         self._rebuild_rows = rebuild_rows
+        a = self._args(model, state_in, state_out, contacts, dt, body_bad_step, bad_count,
+                       color_sizes is not None)
         if color_sizes is None:
-            self._step_fused(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
+            self._step_fused(model, a)
         else:
-            self._step_staged(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                              fresh_contacts, domains, after_impacts)
+            self._step_staged(model, contacts, a, color_sizes, fresh_contacts, domains, after_impacts)
+
+    def _args(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, staged: bool = True):
+        """The struct arguments of a substep's launches (kernel_args.py), the same instances from one
+        substep to the next unless an array was replaced; each State buffer keeps its own."""
+        a = SimpleNamespace(
+            model=bind(BodyModel, model, model), settings=self._step_settings(dt),
+            state_in=bind(BodyState, state_in, state_in), state_out=bind(BodyState, state_out, state_out),
+            slots=bind(TerrainContacts, contacts, contacts),
+            bad_steps=bind(BadSteps, self, self, body_bad_step=body_bad_step, bad_count=bad_count),
+            contacts=contacts, buffer_in=state_in)
+        if staged:
+            self._terrain_rows(model, contacts)
+            self._impact_scratch(contacts)
+            a.pairs = bind(PairContacts, contacts, contacts)
+            a.solver = bind(SolverBodies, self, self)
+        return a
+
+    def _step_settings(self, dt: float) -> StepSettings:
+        s = self.settings
+        key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio,
+               s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.iterations,
+               s.relax_iterations)
+        if getattr(self, "_settings_key", None) != key:
+            # a new instance, never a changed one: recorded launches hold a packed copy (kernel_args.py)
+            v = StepSettings()
+            v.gravity, v.h, v.soft = self.gravity, dt, self._soft(dt)
+            v.integrator, v.rotation = INTEGRATORS[s.integrator], ROTATIONS[s.rotation]
+            v.max_push_velocity, v.restitution_threshold = s.max_push_velocity, s.restitution_threshold
+            v.convergence_tolerance = s.convergence_tolerance
+            v.iterations, v.relax_iterations = s.iterations, s.relax_iterations
+            self._settings_key, self._settings_value = key, v
+        return self._settings_value
 
     def _terrain_rows(self, model, contacts):
         """Row storage (one per slot, packed per body; contact_rows.py) and each body's row count."""
@@ -148,107 +184,48 @@ class SoftStepSolver:
             return MAKE_ROWS
         return MAKE_ROWS_ALWAYS
 
-    def _prepare(self, m, c, state_in, dt, integrator, fresh_contacts: bool, make_rows: bool, from_impact: bool):
+    def _prepare(self, m, a, fresh_contacts: bool, make_rows: bool, from_impact: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
-            m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start, m.body_checkpoint_count,
-            self.gravity, dt, integrator, ROTATIONS[self.settings.rotation], int(fresh_contacts),
-            self._make_rows() if make_rows else MAKE_ROWS_NONE, int(from_impact),
-            state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
-            c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_rolling, self.solver_w0,
-            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r,
-            *self._terrain_rows(m, c)], device=self.device)
+            a.model, a.settings, int(fresh_contacts), self._make_rows() if make_rows else MAKE_ROWS_NONE,
+            int(from_impact), a.state_in, a.slots, a.solver], device=self.device)
 
-    def _integrate_positions(self, m, state_in, state_out, dt, integrator):
+    def _integrate_positions(self, m, a):
         launch(integrate_positions, m.body_count, key=self, inputs=[
-            m.body_shape, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, dt, integrator,
-            ROTATIONS[self.settings.rotation],
-            state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0, self.solver_shift_v, self.solver_shift_w,
-            self.solver_ref_pos, self.solver_ref_rot, self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift,
-            state_out.body_pos, state_out.body_quat, state_out.body_rot], device=self.device)
+            a.model, a.settings, a.state_in, a.solver, a.state_out], device=self.device)
 
-    def _step_fused(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count):
-        s = self.settings
-        launch(
-            solve_and_integrate,
-            dim=model.body_count,
-            key=self,
-            inputs=[
-                # Model
-                model.body_shape, model.body_size, model.body_inv_mass, model.body_inertia,
-                model.body_inv_inertia, model.body_restitution, model.body_friction,
-                model.body_rolling_resistance, model.body_checkpoint_start, model.body_checkpoint_count,
-                # Settings
-                self.gravity, dt, INTEGRATORS[s.integrator], ROTATIONS[s.rotation], s.iterations,
-                s.relax_iterations, self._soft(dt),
-                s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, self.sim_step,
-                # Contacts
-                contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
-                contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
-                contacts.terrain_contact_tangent_impulse,
-                # Scratch
-                *self._impact_scratch(contacts),
-                # State in
-                *state_in.fields(),
-                # State out
-                *state_out.fields(),
-                # Out
-                body_bad_step, bad_count,
-            ],
-            device=self.device,
-        )
+    def _step_fused(self, model, a):
+        launch(solve_and_integrate, dim=model.body_count, key=self, inputs=[
+            a.model, a.settings, a.slots, *self._impact_scratch(a.contacts), a.state_in, a.state_out,
+            a.bad_steps], device=self.device)
 
-    def _finalize(self, m, state_in, state_out, dt, integrator, body_bad_step, bad_count):
+    def _finalize(self, m, a):
         launch(finalize_bodies, m.body_count, key=self, min_chunk=LIGHT_CHUNK, inputs=[
-            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
-            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0,
-            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
-            body_bad_step, bad_count], device=self.device)
+            a.model, a.settings, a.state_in, a.solver, a.state_out, a.bad_steps], device=self.device)
 
-    def _impact_begin(self, m, state_in, dt, integrator, fresh_contacts):
+    def _impact_begin(self, m, a, fresh_contacts):
         """The impact stage's start (impact.py): the velocities the last solve left, without this
         substep's gravity.  A scene without restitution runs no impact stage."""
         launch(impact_begin, m.body_count, key=self, inputs=[
-            m.body_inv_mass, m.body_inv_inertia, self.gravity, dt, integrator, ROTATIONS[self.settings.rotation],
-            int(fresh_contacts), state_in.body_pos, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_inv_inertia, self.solver_ref_pos, self.solver_ref_rot,
-            self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift], device=self.device)
+            a.model, a.settings, int(fresh_contacts), a.state_in, a.solver], device=self.device)
 
-    def _impact_sweep(self, m, c, dt, pairs):
+    def _impact_sweep(self, m, a, pairs):
         """One impact sweep: every body's terrain impact, then the pairs' (colour by colour)."""
-        launch(terrain_impact, m.body_count, key=self, inputs=[
-            m.body_inv_mass, m.body_friction, m.body_restitution, m.body_checkpoint_start,
-            m.body_checkpoint_count, dt, self.gravity, self.settings.restitution_threshold,
-            c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal, c.terrain_contact_depth,
-            self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-            self.solver_v, self.solver_w, self.solver_toi_shift, *self._impact_scratch(c)], device=self.device)
+        launch(terrain_impact, m.body_count, key=self, inputs=[a.model, a.settings, a.slots, a.solver],
+               device=self.device)
         pairs(MODE_IMPACT)
 
-    def _step_staged(self, model, state_in, state_out, contacts, dt, body_bad_step, bad_count, color_sizes,
-                     fresh_contacts, domains=None, after_impacts=None):
+    def _step_staged(self, model, contacts, a, color_sizes, fresh_contacts, domains=None, after_impacts=None):
         if domains is not None:
-            self._step_domains(model, state_in, state_out, contacts, dt, body_bad_step, bad_count, fresh_contacts,
-                               domains, after_impacts)
+            self._step_domains(model, a, fresh_contacts, domains, after_impacts)
             return
         s = self.settings
         m, c = model, contacts
         n = m.body_count
-        integrator = INTEGRATORS[s.integrator]
-        soft = self._soft(dt)
         dev = self.device
 
         def terrain(use_bias: int):
-            launch(terrain_sweep, n, key=self, inputs=[
-                m.body_shape, m.body_size, m.body_inv_mass, m.body_friction, m.body_rolling_resistance,
-                m.body_checkpoint_start,
-                dt, use_bias, soft, s.max_push_velocity,
-                c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                self.solver_v, self.solver_w, self.solver_rolling, self.terrain_row, self.terrain_row_count],
-                device=dev)
+            launch(terrain_sweep, n, key=self, inputs=[a.model, a.settings, use_bias, a.slots, a.solver],
+                   device=dev)
 
         def pairs(mode: int):
             for color, size in enumerate(color_sizes):
@@ -256,20 +233,15 @@ class SoftStepSolver:
                     continue
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
-                    mode, color, c.color_start, c.color_pairs_sorted,
-                    m.body_inv_mass, m.body_friction, m.body_restitution, m.body_rolling_arm, m.body_sphere_radius,
-                    dt, self.gravity, soft, s.max_push_velocity, s.restitution_threshold,
-                    c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
-                    c.pair_normal_impulse, c.pair_tangent_impulse,
-                    self.solver_inv_inertia, self.solver_ref_pos, self.solver_drift_p, self.solver_drift_r,
-                    self.solver_v, self.solver_w, self.solver_toi_shift], device=dev)
+                    mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.solver],
+                    device=dev)
 
         plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 
         def impact_sweeps():
             for stage in plan:
                 if stage.kind == IMPACT:
-                    self._impact_sweep(m, c, dt, pairs)
+                    self._impact_sweep(m, a, pairs)
 
         def impacts_again(sizes):
             nonlocal color_sizes
@@ -279,26 +251,25 @@ class SoftStepSolver:
         for stage in plan:
             kind = stage.kind
             if kind == IMPACT_BEGIN:
-                self._impact_begin(m, state_in, dt, integrator, fresh_contacts)
+                self._impact_begin(m, a, fresh_contacts)
             elif kind == IMPACT:
-                self._impact_sweep(m, c, dt, pairs)
+                self._impact_sweep(m, a, pairs)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     color_sizes = after_impacts(impacts_again)
             elif kind == PREPARE:
-                self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, m.has_restitution)
+                self._prepare(m, a, fresh_contacts, True, m.has_restitution)
             elif kind == WARM_START:
                 pairs(stage.mode)
             elif kind == SOLVE or kind == RELAX:
                 terrain(stage.use_bias)
                 pairs(stage.mode)
             elif kind == INTEGRATE:
-                self._integrate_positions(m, state_in, state_out, dt, integrator)
+                self._integrate_positions(m, a)
             elif kind == FINALIZE:
-                self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
+                self._finalize(m, a)
 
-    def _step_domains(self, m, state_in, state_out, c, dt, body_bad_step, bad_count, fresh_contacts, g,
-                      after_impacts=None):
+    def _step_domains(self, m, a, fresh_contacts, g, after_impacts=None):
         """The staged soft step swept slab by slab (solvers/domains.py).
 
         Symmetric Gauss-Seidel: the second solve sweep walks back over the first, and the relax
@@ -318,31 +289,12 @@ class SoftStepSolver:
         could finish every body themselves let a 10-box stack cut into slabs sag 9.2 mm instead
         of 6.9: two boundary sweeps in a row converge as one)."""
         s = self.settings
-        integrator = INTEGRATORS[s.integrator]
-        rotation = ROTATIONS[s.rotation]
         dev = self.device
         impacts = m.has_restitution
-        shared = [g.domain_body_start, g.domain_body, g.domain_pair_start, g.domain_pair, g.body_domain,
-                  g.body_on_boundary, g.boundary_body_count, g.boundary_body,
-                  m.body_shape, m.body_size, m.body_inv_mass, m.body_inertia, m.body_inv_inertia, m.body_friction,
-                  m.body_restitution, m.body_rolling_resistance, m.body_rolling_arm, m.body_sphere_radius,
-                  m.body_checkpoint_start,
-                  m.body_checkpoint_count,
-                  self.gravity, dt, integrator, rotation, int(fresh_contacts), self._make_rows(), int(impacts),
-                  self._soft(dt),
-                  s.max_push_velocity,
-                  s.restitution_threshold, self.sim_step,
-                  state_in.body_pos, state_in.body_quat, state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-                  c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
-                  c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                  c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth,
-                  c.pair_normal_impulse, c.pair_tangent_impulse,
-                  self.solver_v, self.solver_w, self.solver_w0, self.solver_inv_inertia, self.solver_rolling,
-                  self.solver_shift_v, self.solver_shift_w, self.solver_ref_pos, self.solver_ref_rot,
-                  self.solver_drift_p, self.solver_drift_r, self.solver_toi_shift, *self._terrain_rows(m, c),
-                  *self._impact_scratch(c),
-                  state_out.body_pos, state_out.body_quat, state_out.body_rot, state_out.body_vel,
-                  state_out.body_angmom, body_bad_step, bad_count]
+        slabs = bind(DomainSlabs, self, g)
+        shared = [slabs, a.model, a.settings, int(fresh_contacts), self._make_rows(), int(impacts), a.state_in,
+                  a.slots, a.pairs, a.solver, a.state_out, a.bad_steps]
+        state_in = a.buffer_in
 
         def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0):
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
@@ -374,17 +326,17 @@ class SoftStepSolver:
                 if after_impacts is not None:
                     after_impacts(impacts_again)
             elif kind == PREPARE and not fused_with_solve:
-                self._prepare(m, c, state_in, dt, integrator, fresh_contacts, True, impacts)
+                self._prepare(m, a, fresh_contacts, True, impacts)
             elif kind == WARM_START and not fused_with_solve:
                 sweep(stage.mode, 0)
             elif kind == SOLVE:
                 sweep(stage.mode, stage.reverse, prepare=int(stage.first), integrate=int(stage.last))
             elif kind == INTEGRATE and not fused_with_solve:
-                self._integrate_positions(m, state_in, state_out, dt, integrator)
+                self._integrate_positions(m, a)
             elif kind == RELAX:
                 sweep(stage.mode, stage.reverse, finalize=int(stage.last))
             elif kind == FINALIZE and not fused_with_relax:
-                self._finalize(m, state_in, state_out, dt, integrator, body_bad_step, bad_count)
+                self._finalize(m, a)
 
 
 class PushoutSolver(SoftStepSolver):
@@ -401,9 +353,9 @@ class PushoutSolver(SoftStepSolver):
         s = self.settings
         m, c = model, contacts
         n = m.body_count
-        integrator = INTEGRATORS[s.integrator]
         dev = self.device
-        self._prepare(m, c, state_in, dt, integrator, True, False, False)
+        a = self._args(model, state_in, state_out, contacts, dt, body_bad_step, bad_count)
+        self._prepare(m, a, True, False, False)
 
         def pairs(position_pass: int):
             for color, size in enumerate(color_sizes):
@@ -420,7 +372,7 @@ class PushoutSolver(SoftStepSolver):
             state_in.body_pos, c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
             c.terrain_contact_depth, self.solver_inv_inertia, self.solver_v, self.solver_w], device=dev)
         pairs(0)
-        self._integrate_positions(m, state_in, state_out, dt, integrator)
+        self._integrate_positions(m, a)
         for _ in range(s.iterations):
             launch(pushout_terrain_position, n, key=self, inputs=[
                 m.body_inv_mass, m.body_checkpoint_start, m.body_checkpoint_count, state_in.body_pos,
@@ -428,11 +380,7 @@ class PushoutSolver(SoftStepSolver):
                 self.solver_shift_v, self.solver_shift_w, state_out.body_pos], device=dev)
             pairs(1)
         launch(finalize_bodies, n, key=self, inputs=[
-            m.body_inv_mass, m.body_inertia, self.gravity, dt, integrator, self.sim_step,
-            state_in.body_rot, state_in.body_vel, state_in.body_angmom,
-            self.solver_v, self.solver_w, self.solver_w0,
-            state_out.body_pos, state_out.body_rot, state_out.body_vel, state_out.body_angmom,
-            body_bad_step, bad_count], device=dev)
+            a.model, a.settings, a.state_in, a.solver, a.state_out, a.bad_steps], device=dev)
 
 
 def make_solver(settings: SolverSettings, gravity, device, body_count: int = 0) -> SoftStepSolver:
