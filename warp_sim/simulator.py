@@ -51,6 +51,7 @@ from .collide import collide_terrain
 from .collide.narrow_phase import reach_outrun
 from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
+from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bind
 from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.pair_refresh import refresh_turned
@@ -248,21 +249,14 @@ class Simulator:
             key=contacts,
             inputs=[
                 # Model
-                m.body_shape, m.body_size, m.body_inv_mass, m.body_inv_inertia, m.body_checkpoint_start,
-                m.body_checkpoint_count, m.checkpoint_local, m.terrain_kind, m.terrain_coef, m.terrain_terms,
-                m.terrain_frequency, m.terrain_scale, m.terrain_offset, m.terrain_plane, m.terrain_slope_bound,
-                m.terrain_cubic_bound,
+                bind(BodyModel, m, m), bind(TerrainModel, m, m),
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
                 int(refresh_spheres),
                 # State in
-                state.body_pos, state.body_rot, state.body_vel, state.body_angmom, self.solver.solver_ref_pos,
+                bind(BodyState, state, state), self.solver.solver_ref_pos,
                 # Contacts
-                contacts.terrain_contact_active, contacts.terrain_contact_point, contacts.terrain_contact_normal,
-                contacts.terrain_contact_depth, contacts.terrain_contact_normal_impulse,
-                contacts.terrain_contact_tangent_impulse, contacts.terrain_contact_surface,
-                # Out
-                contacts.terrain_contact_count,
+                bind(TerrainContacts, contacts, contacts),
             ],
             device=self.device,
         )

@@ -46,6 +46,7 @@ so a fast body stops on the surface instead of passing through it.
 import warp as wp
 
 from ..integrate import world_inv_inertia
+from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
 from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
 from ..types import SHAPE_SPHERE
 
@@ -126,22 +127,8 @@ REFRESH_MIN_TRAVEL = wp.constant(1.0e-3)
 def collide_terrain(
     tid_offset: int,
     # Model
-    body_shape: wp.array(dtype=wp.int32),
-    body_size: wp.array(dtype=wp.vec3),
-    body_inv_mass: wp.array(dtype=float),
-    body_inv_inertia: wp.array(dtype=wp.vec3),
-    body_checkpoint_start: wp.array(dtype=wp.int32),
-    body_checkpoint_count: wp.array(dtype=wp.int32),
-    checkpoint_local: wp.array(dtype=wp.vec3),
-    terrain_kind: int,
-    terrain_coef: wp.array(dtype=wp.vec2),
-    terrain_terms: int,
-    terrain_frequency: float,
-    terrain_scale: wp.vec3,
-    terrain_offset: wp.vec3,
-    terrain_plane: wp.vec4,
-    terrain_slope_bound: float,
-    terrain_cubic_bound: float,
+    model: BodyModel,
+    terrain: TerrainModel,
     # Settings
     h: float,
     gravity_length: float,
@@ -149,22 +136,11 @@ def collide_terrain(
     cull: int,
     refresh_spheres: int,
     # State in
-    body_pos: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.mat33),
-    body_vel: wp.array(dtype=wp.vec3),
-    body_angmom: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
     # Solver in (the pose of the step's pass)
     reference_pos: wp.array(dtype=wp.vec3),
     # Contacts in/out
-    terrain_contact_active: wp.array(dtype=wp.int32),
-    terrain_contact_point: wp.array(dtype=wp.vec3),
-    terrain_contact_normal: wp.array(dtype=wp.vec3),
-    terrain_contact_depth: wp.array(dtype=float),
-    terrain_contact_normal_impulse: wp.array(dtype=float),
-    terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
-    terrain_contact_surface: wp.array(dtype=wp.vec2),
-    # Out
-    terrain_contact_count: wp.array(dtype=wp.int32),
+    contacts: TerrainContacts,
 ):
     """One thread per body, over its slots: the body's velocity and, for a box on the Fourier
     terrain, the surface sample under its centre are computed once and serve every checkpoint.
@@ -182,24 +158,26 @@ def collide_terrain(
         # a sphere whose slot the pass left idle cannot reach the surface within the step (the
         # pass's window covered it), and one that moved under 1 mm has a tangent-plane gap error
         # under k (1 mm)^2 / 2
-        if body_shape[body] != SHAPE_SPHERE or terrain_contact_active[body_checkpoint_start[body]] == 0:
+        start = model.body_checkpoint_start[body]
+        if model.body_shape[body] != SHAPE_SPHERE or contacts.terrain_contact_active[start] == 0:
             return
-        if wp.length(body_pos[body] - reference_pos[body]) < REFRESH_MIN_TRAVEL:
+        if wp.length(state_in.body_pos[body] - reference_pos[body]) < REFRESH_MIN_TRAVEL:
             return
-    start = body_checkpoint_start[body]
-    count = body_checkpoint_count[body]
-    x = body_pos[body]
-    rot = body_rot[body]
-    v = body_vel[body]
-    omega = world_inv_inertia(rot, body_inv_inertia[body]) * body_angmom[body]
-    is_sphere = body_shape[body] == SHAPE_SPHERE
-    radius = body_size[body][0]
-    dynamic = body_inv_mass[body] > 0.0
-    fourier_box = dynamic and terrain_kind == TERRAIN_FOURIER and not is_sphere
-    gap_scale = wp.sqrt(1.0 + terrain_slope_bound * terrain_slope_bound)
+    start = model.body_checkpoint_start[body]
+    count = model.body_checkpoint_count[body]
+    x = state_in.body_pos[body]
+    rot = state_in.body_rot[body]
+    v = state_in.body_vel[body]
+    omega = world_inv_inertia(rot, model.body_inv_inertia[body]) * state_in.body_angmom[body]
+    is_sphere = model.body_shape[body] == SHAPE_SPHERE
+    radius = model.body_size[body][0]
+    dynamic = model.body_inv_mass[body] > 0.0
+    fourier_box = dynamic and terrain.terrain_kind == TERRAIN_FOURIER and not is_sphere
+    gap_scale = wp.sqrt(1.0 + terrain.terrain_slope_bound * terrain.terrain_slope_bound)
     center = HeightSample()
     if fourier_box and cull != 0:
-        center = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset,
+        center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
+                                terrain.terrain_scale, terrain.terrain_offset,
                                 x[0], x[2])
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
@@ -209,31 +187,33 @@ def collide_terrain(
         normal = wp.vec3(0.0, 1.0, 0.0)
         point = x
         if dynamic:
-            if terrain_kind == TERRAIN_PLANE:
-                n = wp.vec3(terrain_plane[0], terrain_plane[1], terrain_plane[2])
+            if terrain.terrain_kind == TERRAIN_PLANE:
+                n = wp.vec3(terrain.terrain_plane[0], terrain.terrain_plane[1], terrain.terrain_plane[2])
                 normal = n
                 if is_sphere:
                     point = x - radius * n
                 else:
-                    point = x + rot * checkpoint_local[slot]
-                depth = terrain_plane[3] - wp.dot(n, point)
-            elif terrain_kind == TERRAIN_FOURIER:
+                    point = x + rot * model.checkpoint_local[slot]
+                depth = terrain.terrain_plane[3] - wp.dot(n, point)
+            elif terrain.terrain_kind == TERRAIN_FOURIER:
                 if is_sphere:
                     # Start from last substep's closest point when there was one, else from the
                     # point straight below, which also gives the cheap can't-reach test.
                     start_xz = wp.vec2(x[0], x[2])
-                    if terrain_contact_active[slot] != 0:
-                        start_xz = terrain_contact_surface[slot]
-                    s0 = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                        terrain_offset, start_xz[0], start_xz[1])
+                    if contacts.terrain_contact_active[slot] != 0:
+                        start_xz = contacts.terrain_contact_surface[slot]
+                    s0 = fourier_sample(terrain.terrain_coef, terrain.terrain_terms,
+                                        terrain.terrain_frequency, terrain.terrain_scale,
+                                        terrain.terrain_offset, start_xz[0], start_xz[1])
                     reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
                     can_touch = True
-                    if terrain_contact_active[slot] == 0:
+                    if contacts.terrain_contact_active[slot] == 0:
                         lower_bound = (x[1] - s0.height) / gap_scale
                         can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
                     if can_touch:
-                        xz, s = sphere_fourier_closest(terrain_coef, terrain_terms, terrain_frequency,
-                                                       terrain_scale, terrain_offset, x, start_xz, s0, reach)
+                        xz, s = sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms,
+                                                       terrain.terrain_frequency, terrain.terrain_scale,
+                                                       terrain.terrain_offset, x, start_xz, s0, reach)
                         surface = wp.vec3(xz[0], s.height, xz[1])
                         if wp.length(x - surface) > reach:
                             # the search did not improve on its starting point: use that one
@@ -243,18 +223,19 @@ def collide_terrain(
                         normal = fourier_normal(s.grad)
                         depth = radius - wp.dot(x - surface, normal)
                         point = x - radius * normal
-                        terrain_contact_surface[slot] = xz
+                        contacts.terrain_contact_surface[slot] = xz
                 else:
-                    point = x + rot * checkpoint_local[slot]
+                    point = x + rot * model.checkpoint_local[slot]
                     reachable = True
                     if cull != 0:
                         arm = point - x
-                        rise = box_rise_bound(center, arm[0], arm[2], terrain_cubic_bound)
+                        rise = box_rise_bound(center, arm[0], arm[2], terrain.terrain_cubic_bound)
                         gap = speculative_margin + h * wp.length(v + wp.cross(omega, arm)) + h * h * gravity_length
                         reachable = point[1] - (center.height + rise) <= gap * gap_scale + slack
                     if reachable:
-                        s = fourier_height_slope(terrain_coef, terrain_terms, terrain_frequency, terrain_scale,
-                                                 terrain_offset, point[0], point[2])
+                        s = fourier_height_slope(terrain.terrain_coef, terrain.terrain_terms,
+                                                 terrain.terrain_frequency, terrain.terrain_scale,
+                                                 terrain.terrain_offset, point[0], point[2])
                         normal = fourier_normal(s.grad)
                         depth = (s.height - point[1]) * normal[1]
 
@@ -269,12 +250,12 @@ def collide_terrain(
                 shift = x - reference_pos[body]
                 point = point - shift
                 depth = depth + wp.dot(normal, shift)
-            terrain_contact_active[slot] = 1
-            terrain_contact_point[slot] = point
-            terrain_contact_normal[slot] = normal
-            terrain_contact_depth[slot] = depth
+            contacts.terrain_contact_active[slot] = 1
+            contacts.terrain_contact_point[slot] = point
+            contacts.terrain_contact_normal[slot] = normal
+            contacts.terrain_contact_depth[slot] = depth
         else:
-            terrain_contact_active[slot] = 0
-            terrain_contact_normal_impulse[slot] = 0.0
-            terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
-    terrain_contact_count[body] = active
+            contacts.terrain_contact_active[slot] = 0
+            contacts.terrain_contact_normal_impulse[slot] = 0.0
+            contacts.terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+    contacts.terrain_contact_count[body] = active
