@@ -11,6 +11,7 @@
   argument whose type is one of the package's structs is named freely, and the struct's fields
   follow the same rule, with ``# Contacts ...`` / ``# Solver ...`` fields named like Contacts /
   SoftStepSolver fields too.
+- No kernel or func takes more than 25 parameters (a struct counts as one).
 - No module of the package is longer than 650 lines.
 """
 
@@ -26,6 +27,7 @@ PACKAGE = ROOT / "warp_sim"
 GROUP = re.compile(r"# (Model|Settings|State in/out|State in|State out|Contacts in/out|Contacts in|Contacts out|"
                    r"Solver in/out|Solver in|Solver out|Sleep in/out|Sleep in|Broad phase in|In|Out|Scratch)\b")
 MAX_LINES = 650
+MAX_PARAMETERS = 25
 
 
 def modules(folder: Path):
@@ -170,7 +172,7 @@ def test_struct_fields_are_named_like_their_fields():
     assert {"terrain_contact_active", "pair_body"} <= fields["Contacts"]
     used = {ann for _, node, _ in [*kernels(), *definitions("wp.func")] for ann in
             (ast.unparse(a.annotation) for a in node.args.args if a.annotation)}
-    problems = []
+    problems, checked = [], []
     for path, node, lines in definitions("wp.struct"):
         named, end = entries(node, lines)
         if node.name not in used or not any("wp.array" in annotation for _, _, annotation in named):
@@ -179,7 +181,15 @@ def test_struct_fields_are_named_like_their_fields():
         if len(named) > 1 and not any(GROUP.match(lines[k - 1].strip()) for k in range(node.lineno, end)):
             problems.append(f"{where}: fields without a group comment")
         problems += naming_problems(where, node, lines, fields, set(), contacts=True)
+        checked.append(node.name)
+    assert {"BodyModel", "BodyState", "TerrainContacts", "PairContacts", "SolverBodies"} <= set(checked)
     assert not problems, "\n".join(problems)
+
+
+def test_no_kernel_or_func_takes_more_than_25_parameters():
+    long = [f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {len(node.args.args)}"
+            for path, node, _ in [*kernels(), *definitions("wp.func")] if len(node.args.args) > MAX_PARAMETERS]
+    assert not long, "\n".join(long)
 
 
 def test_the_naming_check_catches_a_misnamed_struct_field():
