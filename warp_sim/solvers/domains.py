@@ -35,7 +35,7 @@ The slabs themselves are cut by warp_sim/schedule/slabs.py, once per collision p
 import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
-from .impact import impact_begin_body, impact_terrain_body
+from .impact import IMPACT_INNER, impact_begin_body, impact_terrain_body
 from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, solve_one_pair,
                          warm_start_pair_side)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -61,6 +61,7 @@ def domain_sweep(
     prepare: int,
     integrate: int,
     finalize: int,
+    impact_round: int,
     # In
     slabs: DomainSlabs,
     # Model
@@ -106,10 +107,15 @@ def domain_sweep(
     pair_first = slabs.domain_pair_start[d]
     pair_count = slabs.domain_pair_start[d + 1] - pair_first
     if d == domain_count:
-        for q in range(pair_count):
-            solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, reverse)], mode, model,
-                           settings, pairs,
-                           solver)
+        # impacts: IMPACT_INNER sweeps a launch, numbered after the slabs' of the same round
+        inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
+        for u in range(inner):
+            sweep = impact_round * 2 * IMPACT_INNER + IMPACT_INNER + u
+            since = wp.where(u > 0, sweep - 1, wp.where(impact_round > 0, impact_round * 2 * IMPACT_INNER - 1, -1))
+            direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
+            for q in range(pair_count):
+                solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, direction)], mode, model, settings,
+                               pairs, solver, sweep, since)
         for k in range(slabs.boundary_body_count[0]):
             i = slabs.boundary_body[k]
             if integrate != 0:
@@ -129,7 +135,7 @@ def domain_sweep(
                          from_impact,
                          state_in, slots, solver)
         for k in range(pair_count):
-            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver)
+            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1)
         # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
         # boundary impulse applied after the first sweep let a stack split across two slabs sag
         # 27 mm instead of 7)
@@ -144,24 +150,30 @@ def domain_sweep(
     use_bias = int(mode == MODE_SOLVE)
     if mode == MODE_RELAX_CLOSED:
         use_bias = -1
-    # forward: terrain, then pairs; backward: the same sequence walked from its end
-    for part in range(2):
-        if (part == 0) == (reverse == 0):
-            if mode == MODE_IMPACT:
-                for k in range(body_count):
-                    impact_terrain_body(slabs.domain_body[walk(body_first, body_count, k, reverse)], model,
-                                        settings,
-                                        slots, solver)
-            elif terrain:
-                for k in range(body_count):
-                    sweep_body_terrain(slabs.domain_body[walk(body_first, body_count, k, reverse)], model,
-                                       settings,
-                                       use_bias, slots, solver)
-        else:
-            for k in range(pair_count):
-                solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, k, reverse)], mode, model,
-                               settings,
-                               pairs, solver)
+    # forward: terrain, then pairs; backward: the same sequence walked from its end.  Impacts run
+    # IMPACT_INNER such sweeps a launch, alternating, so a chain of impacts inside a slab (a body
+    # falling on a pile) is carried through in one launch; sweep numbers let a manifold whose bodies
+    # no impact has changed since it was last taken be skipped (impact.unchanged_since)
+    inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
+    for u in range(inner):
+        sweep = impact_round * 2 * IMPACT_INNER + u
+        since = wp.where(u > 0, sweep - 1,
+                         wp.where(impact_round > 0, (impact_round - 1) * 2 * IMPACT_INNER + IMPACT_INNER - 1, -1))
+        direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
+        for part in range(2):
+            if (part == 0) == (direction == 0):
+                if mode == MODE_IMPACT:
+                    for k in range(body_count):
+                        impact_terrain_body(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
+                                            settings, slots, solver, sweep, since)
+                elif terrain:
+                    for k in range(body_count):
+                        sweep_body_terrain(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
+                                           settings, use_bias, slots, solver)
+            else:
+                for k in range(pair_count):
+                    solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, k, direction)], mode, model,
+                                   settings, pairs, solver, sweep, since)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
             i = slabs.domain_body[body_first + k]

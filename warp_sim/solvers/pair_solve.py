@@ -70,9 +70,11 @@ def solve_one_pair(
     pairs: PairContacts,
     # Solver in/out
     solver: SolverBodies,
+    impact_sweep: int,
+    impact_since: int,
 ):
     if mode == MODE_IMPACT:
-        impact_pair(p, model, settings, pairs, solver)
+        impact_pair(p, model, settings, pairs, solver, impact_sweep, impact_since)
         return
     ij = pairs.pair_body[p]
     i = ij[0]
@@ -246,6 +248,8 @@ def warm_start_pair_side(
 def pair_pass(
     tid_offset: int,
     mode: int,
+    impact_sweep: int,
+    impact_since: int,
     color: int,
     color_start: wp.array(dtype=wp.int32),
     color_pairs_sorted: wp.array(dtype=wp.int32),
@@ -260,4 +264,4 @@ def pair_pass(
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver)
+        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since)

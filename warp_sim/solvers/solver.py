@@ -21,7 +21,7 @@ from ..schedule.coloring import COLOR_COUNT
 from .contact_rows import TerrainRow
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
-from .impact import impact_begin, terrain_impact
+from .impact import IMPACT_INNER, impact_begin, terrain_impact
 from .pair_solve import MODE_IMPACT, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import soft_coefficients, solve_and_integrate
@@ -82,6 +82,8 @@ class SoftStepSolver:
         self.solver_drift_r = wp.zeros(n, dtype=wp.mat33, device=device)
         # an impact's time-of-impact position shift, spent by the next integration (impact.py)
         self.solver_toi_shift = wp.zeros(n, dtype=wp.vec3, device=device)
+        # the impact sweep that last changed a body's velocity (impact.unchanged_since)
+        self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
 
     def _soft(self, dt: float):
         # one vec3 object per dt, so recorded launches see an unchanged argument
@@ -208,11 +210,15 @@ class SoftStepSolver:
         launch(impact_begin, m.body_count, key=self, inputs=[
             a.model, a.settings, int(fresh_contacts), a.state_in, a.solver], device=self.device)
 
-    def _impact_sweep(self, m, a, pairs):
-        """One impact sweep: every body's terrain impact, then the pairs' (colour by colour)."""
-        launch(terrain_impact, m.body_count, key=self, inputs=[a.model, a.settings, a.slots, a.solver],
-               device=self.device)
-        pairs(MODE_IMPACT)
+    def _impact_sweep(self, m, a, pairs, impact_round: int):
+        """One impact stage's IMPACT_INNER sweeps: every body's terrain impact, then the pairs'
+        (colour by colour), numbered so that manifolds no impact has touched since are skipped."""
+        for u in range(IMPACT_INNER):
+            sweep = impact_round * IMPACT_INNER + u
+            since = sweep - 1 if sweep > 0 else -1
+            launch(terrain_impact, m.body_count, key=self,
+                   inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
+            pairs(MODE_IMPACT, sweep, since)
 
     def _step_staged(self, model, contacts, a, color_sizes, fresh_contacts, domains=None, after_impacts=None):
         if domains is not None:
@@ -227,21 +233,21 @@ class SoftStepSolver:
             launch(terrain_sweep, n, key=self, inputs=[a.model, a.settings, use_bias, a.slots, a.solver],
                    device=dev)
 
-        def pairs(mode: int):
+        def pairs(mode: int, sweep: int = 0, since: int = -1):
             for color, size in enumerate(color_sizes):
                 if size == 0:
                     continue
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
-                    mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.solver],
-                    device=dev)
+                    mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
+                    a.solver], device=dev)
 
         plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 
         def impact_sweeps():
             for stage in plan:
                 if stage.kind == IMPACT:
-                    self._impact_sweep(m, a, pairs)
+                    self._impact_sweep(m, a, pairs, stage.index)
 
         def impacts_again(sizes):
             nonlocal color_sizes
@@ -253,7 +259,7 @@ class SoftStepSolver:
             if kind == IMPACT_BEGIN:
                 self._impact_begin(m, a, fresh_contacts)
             elif kind == IMPACT:
-                self._impact_sweep(m, a, pairs)
+                self._impact_sweep(m, a, pairs, stage.index)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     color_sizes = after_impacts(impacts_again)
@@ -296,17 +302,19 @@ class SoftStepSolver:
                   a.slots, a.pairs, a.solver, a.state_out, a.bad_steps]
         state_in = a.buffer_in
 
-        def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0):
+        def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0, impact_round=0):
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
-                                                  *shared], dev,
-                   key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize), min_chunk=1)
+                                                  impact_round, *shared], dev,
+                   key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize, impact_round),
+                   min_chunk=1)
             if g.boundary_pairs:
                 launch(domain_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, 0, integrate, finalize,
-                                         *shared], dev,
-                       key=self._site(state_in, "boundary", mode, reverse, integrate, finalize), min_chunk=1)
+                                         impact_round, *shared], dev,
+                       key=self._site(state_in, "boundary", mode, reverse, integrate, finalize, impact_round),
+                       min_chunk=1)
 
         if g.static_bodies:
-            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, *shared], dev,
+            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
         plan = substep_plan(s.iterations, s.relax_iterations, impacts)
         # the per-body stages ride on the sweeps next to them (module docstring of plan.py)
@@ -316,12 +324,13 @@ class SoftStepSolver:
         def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
             for again in plan:
                 if again.kind == IMPACT:
-                    sweep(again.mode, again.reverse)
+                    sweep(again.mode, again.reverse, impact_round=again.index)
 
         for stage in plan:
             kind = stage.kind
             if kind == IMPACT:
-                sweep(stage.mode, stage.reverse, prepare=int(stage.first))  # prepare: the impact begin
+                # prepare: the impact begin
+                sweep(stage.mode, stage.reverse, prepare=int(stage.first), impact_round=stage.index)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     after_impacts(impacts_again)
