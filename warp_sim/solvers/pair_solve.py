@@ -11,6 +11,7 @@ from ..kernel_args import BodyModel, BodyState, PairContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .pair_geometry import pair_point_now
+from .soft_step import RELAX_PASSES
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -102,65 +103,75 @@ def solve_one_pair(
     rolling_arm = wp.max(model.body_rolling_arm[i], model.body_rolling_arm[j])
     if mode == MODE_WARM_START and count == 1:
         pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
-    normal_total = float(0.0)
-
     radius_i = model.body_sphere_radius[i]
     radius_j = model.body_sphere_radius[j]
 
-    for k in range(count):
-        slot = p * POINTS + k
-        # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
-        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], xi, xj,
-                             drift_pi, drift_pj, drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
-        n = now.normal
-        ri = now.arm_i
-        rj = now.arm_j
-        acc = pairs.pair_normal_impulse[slot]
-        if mode == MODE_WARM_START:
-            vel = apply_pair_impulse(vel, acc * n + pairs.pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj,
-                                     inv_ii, inv_ij)
-        else:
-            separation = now.separation
-            # Non-penetration
-            bias = float(0.0)
-            mass_scale = float(1.0)
-            impulse_scale = float(0.0)
-            if separation > 0.0:
-                if mode == MODE_RELAX_CLOSED:
+    # a relax walks the pair's own points again until a pass moves nothing (staged.sweep_body_terrain
+    # says why: one pass gives back only part of the push-out speed)
+    passes = wp.where((mode == MODE_RELAX or mode == MODE_RELAX_CLOSED) and count > 1, RELAX_PASSES, 1)
+    reach_i = wp.length(model.body_size[i])
+    reach_j = wp.length(model.body_size[j])
+    for _pass in range(passes):
+        before = vel
+        normal_total = float(0.0)
+        for k in range(count):
+            slot = p * POINTS + k
+            # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
+            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], xi, xj,
+                                 drift_pi, drift_pj, drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
+            n = now.normal
+            ri = now.arm_i
+            rj = now.arm_j
+            acc = pairs.pair_normal_impulse[slot]
+            if mode == MODE_WARM_START:
+                vel = apply_pair_impulse(vel, acc * n + pairs.pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj,
+                                         inv_ii, inv_ij)
+            else:
+                separation = now.separation
+                # Non-penetration
+                bias = float(0.0)
+                mass_scale = float(1.0)
+                impulse_scale = float(0.0)
+                if separation > 0.0:
+                    if mode == MODE_RELAX_CLOSED:
+                        continue
+                    bias = separation / settings.h
+                elif mode == MODE_SOLVE:
+                    bias = wp.max(settings.soft[0] * separation, -settings.max_push_velocity)
+                    mass_scale = settings.soft[1]
+                    impulse_scale = settings.soft[2]
+                vn = wp.dot(relative_velocity(vel, ri, rj), n)
+                old_t = pairs.pair_tangent_impulse[slot]
+                if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
+                    # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no
+                    # old friction to remove; the point would change nothing (contact_rows.py)
                     continue
-                bias = separation / settings.h
-            elif mode == MODE_SOLVE:
-                bias = wp.max(settings.soft[0] * separation, -settings.max_push_velocity)
-                mass_scale = settings.soft[1]
-                impulse_scale = settings.soft[2]
-            vn = wp.dot(relative_velocity(vel, ri, rj), n)
-            old_t = pairs.pair_tangent_impulse[slot]
-            if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
-                # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no
-                # old friction to remove; the point would change nothing (contact_rows.py)
-                continue
-            k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-            lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
-            new_acc = wp.max(acc + lam, 0.0)
-            pairs.pair_normal_impulse[slot] = new_acc
-            vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-            # Friction: accumulated tangential impulse clamped to the Coulomb disc
-            vr = relative_velocity(vel, ri, rj)
-            vt = vr - wp.dot(vr, n) * n
-            old_t = old_t - wp.dot(old_t, n) * n
-            new_t = old_t
-            slip = wp.length(vt)
-            if slip > 1.0e-9:
-                tangent = vt / slip
-                k_t = normal_mass_inverse(tangent, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-                new_t = old_t - (slip / k_t) * tangent
-            limit = friction * new_acc
-            mag = wp.length(new_t)
-            if mag > limit:
-                new_t = new_t * (limit / mag)
-            pairs.pair_tangent_impulse[slot] = new_t
-            vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-            normal_total = normal_total + new_acc
+                k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
+                new_acc = wp.max(acc + lam, 0.0)
+                pairs.pair_normal_impulse[slot] = new_acc
+                vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                # Friction: accumulated tangential impulse clamped to the Coulomb disc
+                vr = relative_velocity(vel, ri, rj)
+                vt = vr - wp.dot(vr, n) * n
+                old_t = old_t - wp.dot(old_t, n) * n
+                new_t = old_t
+                slip = wp.length(vt)
+                if slip > 1.0e-9:
+                    tangent = vt / slip
+                    k_t = normal_mass_inverse(tangent, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                    new_t = old_t - (slip / k_t) * tangent
+                limit = friction * new_acc
+                mag = wp.length(new_t)
+                if mag > limit:
+                    new_t = new_t * (limit / mag)
+                pairs.pair_tangent_impulse[slot] = new_t
+                vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                normal_total = normal_total + new_acc
+        change = (wp.length(vel.vi - before.vi) + wp.length(vel.vj - before.vj) + reach_i * wp.length(vel.wi - before.wi)
+                  + reach_j * wp.length(vel.wj - before.wj))
+        if change < settings.convergence_tolerance:
+            break
 
     if rolling_arm > 0.0 and count == 1 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
         # against the relative spin, with the mass of its axis, clamped to c_r r J_n

@@ -51,6 +51,12 @@ from .solver_args import StepSettings
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
 
+# Passes over a body's own terrain contacts (a pair's own points) a relax sweep may take; it stops
+# once a pass changes no point's velocity by more than convergence_tolerance.  A cube 2 cm deep
+# without gravity kept 22 % of its push-out speed after 1 pass, 1 % after 2; thin plates pressed
+# into a box 3 times heavier needed up to 8 (tests/test_push_out.py).
+RELAX_PASSES = 8
+
 
 def soft_coefficients(h: float, contact_hertz: float | None, damping_ratio: float) -> wp.vec3:
     """(biasRate, massScale, impulseScale) for substep h: a quarter of the substep rate, capped by
@@ -362,7 +368,9 @@ def solve_and_integrate(
         relax_bias = wp.where(e > 0.0, -1, 0)
         shift_v = step
         shift_r = drift_rotation(model.body_shape[i], rot_new, rot)
-        for _it in range(settings.relax_iterations):
+        # a box's points give back their push speed in several passes (staged.sweep_body_terrain)
+        relax_sweeps = wp.where(count > 1, settings.relax_iterations * RELAX_PASSES, settings.relax_iterations)
+        for _it in range(relax_sweeps):
             before = vel
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,
                         settings.soft, settings.max_push_velocity, shift_v, shift_r, slots.terrain_contact_active,
