@@ -1,4 +1,5 @@
-"""Push-out gains no kinetic energy (issue 12: kinetic energy never rises through a contact).
+"""Push-out: it gains no kinetic energy (issue 12: kinetic energy never rises through a contact),
+and a contact deeper than any load could sag it is pushed back within the step.
 
 The soft solve pushes a penetrating body out with a bias velocity, and the relax sweeps without
 bias take that velocity back (soft_step.py).  A relax that gives back only part of it leaves the
@@ -9,6 +10,8 @@ velocity by more than ``convergence_tolerance`` (1e-5 m/s); Gauss-Seidel's error
 a small multiple of its last change, so what is left is under 10 x 1e-5 m/s.
 """
 
+import math
+
 import numpy as np
 import pytest
 import warp as wp
@@ -16,6 +19,7 @@ import warp as wp
 from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig
 from warp_sim.builder import Material
 from warp_sim.simulator import Simulator
+from warp_sim.solvers.soft_step import soft_coefficients
 
 wp.config.quiet = True
 LEFT_SPEED = 10 * SimConfig().convergence_tolerance
@@ -52,3 +56,27 @@ def test_push_out_leaves_no_speed_behind(pair_schedule, depth, partner, ratio, h
     pos = sim.state.body_pos.numpy()
     gap = pos[-1, 1] - (half[1] if partner == "terrain" else pos[0, 1] + 2 * half[1])
     assert gap > -depth + 1e-3
+
+
+@pytest.mark.parametrize("depth", [0.012, 0.02, 0.03])
+@pytest.mark.parametrize("partner, ratio", [("terrain", 1.0), ("box", 10.0), ("box", 1.0)])
+def test_a_contact_deeper_than_the_column_sag_budget_is_pushed_back_to_it(depth, partner, ratio):
+    """No gravity, a cube ``depth`` into the ground or into another cube.  No load the substep plan
+    allows sags a contact deeper than column_sag d (soft_step.closed_contact_bias), so the excess
+    is pushed out at (s + d) / h, capped at max_push_velocity v_p: it is gone after
+    ceil((depth - d) / (v_p h)) substeps.  Then only the soft bias acts, taking biasRate s h a
+    substep, so after the step's remaining k substeps the overlap lies in
+    [d (1 - biasRate h)^k, d] (0.3 mm allows the leak and float32).  The soft law alone would have
+    left about depth exp(-biasRate dt), three quarters of it."""
+    config = SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, allow_initial_overlap=True)
+    d = config.column_sag
+    h = config.dt / config.substeps
+    bias_rate = soft_coefficients(h, config.contact_hertz, config.damping_ratio, d)[0]
+    b = overlapping(depth, partner, ratio, (0.5, 0.5, 0.5))
+    sim = Simulator(b.finalize("cpu"), config)
+    sim.step()
+    pos = sim.state.body_pos.numpy().astype(float)
+    overlap = (0.5 - pos[-1, 1]) if partner == "terrain" else (1.0 - (pos[1, 1] - pos[0, 1]))
+    k = config.substeps - math.ceil((depth - d) / (config.max_push_velocity * h))
+    assert d * (1.0 - bias_rate * h) ** k - 3e-4 <= overlap <= d + 3e-4, overlap
+    assert np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max() < LEFT_SPEED

@@ -127,6 +127,7 @@ class SimConfig:
             contact_hertz=self.contact_hertz,
             damping_ratio=self.damping_ratio,
             max_push_velocity=self.max_push_velocity,
+            soft_depth=self.column_sag,
             restitution_threshold=self.restitution_threshold,
             convergence_tolerance=self.convergence_tolerance,
             solver=self.solver,

@@ -29,6 +29,24 @@ import warp as wp
 wp.set_module_options({"enable_backward": False})
 
 
+@wp.func
+def closed_contact_bias(separation: float, h: float, soft: wp.vec4, max_push_velocity: float) -> float:
+    """Push-out velocity target of a closed contact (separation s <= 0) in a biased sweep.
+
+    The soft law's bias is biasRate s (soft_step.py), which lets a spring hold a load by sagging
+    load / (m_eff omega^2).  The substep plan keeps that sag under ``column_sag`` for a whole
+    column (column_sag.py), so no contact carrying a load the plan allows is deeper than
+    soft[3] = column_sag.  A contact deeper than that was driven in by a blow the spring was
+    never meant to take (a plate struck through a pile of plates), so its excess s + d is pushed
+    out within the substep: bias = min(biasRate s, (s + d) / h), capped at max_push_velocity as
+    before.  The mass scale and leak stay the soft law's, so loads still find their spring
+    equilibrium, and the relax takes the push speed back (RELAX_PASSES), so this adds no energy."""
+    bias = wp.max(soft[0] * separation, -max_push_velocity)
+    if separation < -soft[3]:
+        bias = wp.max(wp.min(bias, (separation + soft[3]) / h), -max_push_velocity)
+    return bias
+
+
 @wp.struct
 class TerrainRow:
     """One terrain contact's rows for the current substep (body side only: the terrain is static).
@@ -122,7 +140,7 @@ def solve_terrain_row(
     friction: float,
     h: float,
     use_bias: int,
-    soft: wp.vec3,
+    soft: wp.vec4,
     max_push_velocity: float,
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
@@ -141,7 +159,7 @@ def solve_terrain_row(
             return wp.spatial_vector(w, v)
         bias = separation / h
     elif use_bias > 0:
-        bias = wp.max(soft[0] * separation, -max_push_velocity)
+        bias = closed_contact_bias(separation, h, soft, max_push_velocity)
         mass_scale = soft[1]
         impulse_scale = soft[2]
     acc = terrain_contact_normal_impulse[slot]

@@ -10,6 +10,7 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
+from .contact_rows import closed_contact_bias
 from .pair_geometry import pair_point_now
 from .soft_step import RELAX_PASSES
 from .solver_args import SolverBodies, StepSettings
@@ -137,7 +138,7 @@ def solve_one_pair(
                         continue
                     bias = separation / settings.h
                 elif mode == MODE_SOLVE:
-                    bias = wp.max(settings.soft[0] * separation, -settings.max_push_velocity)
+                    bias = closed_contact_bias(separation, settings.h, settings.soft, settings.max_push_velocity)
                     mass_scale = settings.soft[1]
                     impulse_scale = settings.soft[2]
                 vn = wp.dot(relative_velocity(vel, ri, rj), n)

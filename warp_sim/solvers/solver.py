@@ -47,6 +47,7 @@ class SolverSettings:
     contact_hertz: float | None = None  # None: a quarter of the substep rate (column_sag.contact_hertz)
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
+    soft_depth: float = 0.0075  # [m] SimConfig.column_sag: deeper, a contact's excess is pushed out in a substep
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     solver: str = "soft_step"
@@ -86,10 +87,11 @@ class SoftStepSolver:
         self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
 
     def _soft(self, dt: float):
-        # one vec3 object per dt, so recorded launches see an unchanged argument
+        # one vec4 object per dt, so recorded launches see an unchanged argument
         if getattr(self, "_soft_dt", None) != dt:
             self._soft_dt = dt
-            self._soft_value = soft_coefficients(dt, self.settings.contact_hertz, self.settings.damping_ratio)
+            self._soft_value = soft_coefficients(dt, self.settings.contact_hertz, self.settings.damping_ratio,
+                                                 self.settings.soft_depth)
         return self._soft_value
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
@@ -135,7 +137,7 @@ class SoftStepSolver:
 
     def _step_settings(self, dt: float) -> StepSettings:
         s = self.settings
-        key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio,
+        key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio, s.soft_depth,
                s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.iterations,
                s.relax_iterations)
         if getattr(self, "_settings_key", None) != key:

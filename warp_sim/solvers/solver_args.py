@@ -16,7 +16,7 @@ class StepSettings:
     h: float
     integrator: int
     rotation: int
-    soft: wp.vec3
+    soft: wp.vec4
     max_push_velocity: float
     restitution_threshold: float
     convergence_tolerance: float
