@@ -1,7 +1,8 @@
 """Byte model: bytes read and written per body-step, per kernel, counted from one real step.
 
 Every launch made through ``warp_sim.launch`` during one step is recorded with its dimension
-and its array arguments.  The model charges each launch, for each array argument, the elements
+and its array arguments (a struct argument, warp_sim/kernel_args.py, contributes the fields that
+the kernel's code, or a package func it calls, names).  The model charges each launch, for each array argument, the elements
 its live threads own, read and written once:
 
     bytes = sum over arrays  itemsize x min(length, live x per_thread)
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -45,6 +47,72 @@ PAIR_KERNELS = {"collide_pairs", "carry_pair_impulses", "store_pairs", "color_in
 
 # per-body or per-pair kernels launched with wp.launch directly (atomics: never split)
 DIRECT_KERNELS = {"reach_outrun", "mark_touched_sleepers", "gather_neighbour_timers"}
+
+
+def _function_sources() -> dict[str, str]:
+    """Source of every @wp.func of the package, by name."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    import warp_sim
+
+    sources = {}
+    for info in pkgutil.walk_packages(warp_sim.__path__, "warp_sim."):
+        if info.name.endswith("__main__"):
+            continue
+        module = importlib.import_module(info.name)
+        for value in vars(module).values():
+            if type(value).__name__ == "Function" and getattr(value, "func", None) is not None:
+                try:
+                    sources.setdefault(value.key, inspect.getsource(value.func))
+                except (OSError, TypeError):
+                    pass
+    return sources
+
+
+_FUNCTIONS: dict[str, str] | None = None
+_FIELDS_USED: dict[str, str] = {}
+
+
+def kernel_source(kernel) -> str:
+    """The kernel's source with that of every package func it calls, transitively: the struct
+    fields it can touch are those named in it (``.field``)."""
+    global _FUNCTIONS
+    if kernel.key in _FIELDS_USED:
+        return _FIELDS_USED[kernel.key]
+    if _FUNCTIONS is None:
+        _FUNCTIONS = _function_sources()
+    text, pending, seen = kernel.adj.source, [kernel.adj.source], set()
+    while pending:
+        for name in re.findall(r"(\w+)\(", pending.pop()):
+            if name in _FUNCTIONS and name not in seen:
+                seen.add(name)
+                text += _FUNCTIONS[name]
+                pending.append(_FUNCTIONS[name])
+    _FIELDS_USED[kernel.key] = text
+    return text
+
+
+def launch_arrays(kernel, inputs) -> list:
+    """The array arguments of a launch: plain arrays, and the fields of struct arguments
+    (warp_sim/kernel_args.py) that the kernel's code names; each storage once."""
+    found, seen = [], set()
+    source = None
+    for value in inputs:
+        if isinstance(value, wp.array):
+            candidates = [value]
+        elif hasattr(value, "_cls") and hasattr(value._cls, "vars"):  # a wp.struct instance
+            source = source or kernel_source(kernel)
+            candidates = [getattr(value, field) for field in value._cls.vars
+                          if re.search(r"\." + field + r"\b", source)]
+        else:
+            continue
+        for a in candidates:
+            if isinstance(a, wp.array) and a.size > 0 and a.ptr not in seen:
+                seen.add(a.ptr)
+                found.append(a)
+    return found
 
 
 class ByteCounter:
@@ -84,13 +152,13 @@ class ByteCounter:
                 starts = args["color_start"].numpy()
                 live = int(starts[args["color"] + 1] - starts[args["color"]])
             live = min(live, dim)
-            for value in inputs:
-                if isinstance(value, wp.array) and value.size > 0:
+            for value in launch_arrays(kernel, inputs):
+                if value.size > 0:
                     per_pair = 2 if value.size == max(self.body_count, 1) else math.ceil(value.size / self.capacity)
                     total += wp.types.type_size_in_bytes(value.dtype) * min(value.size, live * per_pair)
         else:
-            for value in inputs:
-                if isinstance(value, wp.array) and value.size > 0:
+            for value in launch_arrays(kernel, inputs):
+                if value.size > 0:
                     per_thread = math.ceil(value.size / dim)
                     total += wp.types.type_size_in_bytes(value.dtype) * min(value.size, dim * per_thread)
         entry = self.kernels[name]
