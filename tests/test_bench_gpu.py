@@ -30,3 +30,23 @@ def test_quick_run_writes_every_part(tmp_path):
     assert parts["memory"]["simulator_bytes_per_body"] > 0
     assert (tmp_path / "gpu.csv").read_text().count("\n") >= 5
     assert (tmp_path / "gpu.png").stat().st_size > 0
+
+
+def test_byte_model_charges_the_struct_fields_a_kernel_names():
+    """Kernels take their arrays in structs (warp_sim/kernel_args.py): the model must still charge
+    them (a counter that saw only plain array arguments charged prepare_bodies and terrain_sweep
+    nothing), and only the fields the kernel's code names (prepare_bodies never reads the
+    checkpoints' body-frame points)."""
+    from bench import byte_model
+    from warp_sim.kernel_args import BodyModel, bind
+    from warp_sim.solvers.staged import prepare_bodies
+
+    sim = cases.terrain_drop(40, "mix", spacing=0.9, body_contact=True, sleep=False, pair_schedule="colors")
+    sim.step(30)
+    model = byte_model.per_body_step(sim)
+    for kernel in ("prepare_bodies", "terrain_sweep", "integrate_positions"):
+        assert model.get(kernel, 0.0) > 0.0, kernel
+    body_model = bind(BodyModel, sim.model, sim.model)
+    charged = {a.ptr for a in byte_model.launch_arrays(prepare_bodies, [0, body_model])}
+    assert body_model.body_inv_mass.ptr in charged
+    assert body_model.checkpoint_local.ptr not in charged
