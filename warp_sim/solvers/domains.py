@@ -51,6 +51,25 @@ def walk(first: int, count: int, k: int, reverse: int) -> int:
     return first + k
 
 
+@wp.func
+def impact_sweep_number(impact_round: int, boundary: int, u: int) -> int:
+    """The number of the u-th impact sweep of a round: a round runs IMPACT_INNER slab sweeps, then
+    IMPACT_INNER boundary sweeps (``boundary`` 1), each launch looping over its own."""
+    return (2 * impact_round + boundary) * IMPACT_INNER + u
+
+
+@wp.func
+def impact_sweep_since(impact_round: int, boundary: int, u: int) -> int:
+    """The sweep in which the same launch kind last took its manifolds (impact.unchanged_since):
+    the one before within a launch, else the last of the previous round's launch; -1 in the
+    substep's first launch, which takes every manifold."""
+    if u > 0:
+        return impact_sweep_number(impact_round, boundary, u - 1)
+    if impact_round == 0:
+        return -1
+    return impact_sweep_number(impact_round - 1, boundary, IMPACT_INNER - 1)
+
+
 @wp.kernel
 def domain_sweep(
     tid_offset: int,
@@ -110,8 +129,8 @@ def domain_sweep(
         # impacts: IMPACT_INNER sweeps a launch, numbered after the slabs' of the same round
         inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
         for u in range(inner):
-            sweep = impact_round * 2 * IMPACT_INNER + IMPACT_INNER + u
-            since = wp.where(u > 0, sweep - 1, wp.where(impact_round > 0, impact_round * 2 * IMPACT_INNER - 1, -1))
+            sweep = impact_sweep_number(impact_round, 1, u)
+            since = impact_sweep_since(impact_round, 1, u)
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
             for q in range(pair_count):
                 solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, direction)], mode, model, settings,
@@ -156,9 +175,8 @@ def domain_sweep(
     # no impact has changed since it was last taken be skipped (impact.unchanged_since)
     inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
     for u in range(inner):
-        sweep = impact_round * 2 * IMPACT_INNER + u
-        since = wp.where(u > 0, sweep - 1,
-                         wp.where(impact_round > 0, (impact_round - 1) * 2 * IMPACT_INNER + IMPACT_INNER - 1, -1))
+        sweep = impact_sweep_number(impact_round, 0, u)
+        since = impact_sweep_since(impact_round, 0, u)
         direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
         for part in range(2):
             if (part == 0) == (direction == 0):

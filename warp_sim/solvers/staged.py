@@ -37,7 +37,7 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import make_terrain_row, solve_terrain_row
-from .soft_step import RELAX_PASSES, BodyVelocity, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
+from .soft_step import RELAX_PASSES, BodyVelocity, sweep_converged, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -195,8 +195,9 @@ def sweep_body_terrain(
     passes = wp.where(use_bias > 0 or count == 1, 1, RELAX_PASSES)  # one point gives all back in one
     reach = wp.length(model.body_size[i])
     for _pass in range(passes):
-        v_before = v
-        w_before = w
+        before = BodyVelocity()
+        before.v = v
+        before.w = w
         for k in range(count):
             row = solver.terrain_row[start + k]
             # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
@@ -215,7 +216,10 @@ def sweep_body_terrain(
                                     rolling * slots.terrain_contact_normal_impulse[row.slot])
                 w = vel.w
                 rolling_impulse = vel.rolling_impulse
-        if wp.length(v - v_before) + reach * wp.length(w - w_before) < settings.convergence_tolerance:
+        after = BodyVelocity()
+        after.v = v
+        after.w = w
+        if sweep_converged(before, after, reach, settings.convergence_tolerance):
             break
     solver.solver_v[i] = v
     solver.solver_w[i] = w
