@@ -265,6 +265,8 @@ def thin_box_rain(quick: bool) -> list[dict]:
         variants = [("mixed_rain.toml, 4 x 10 x 4", mixed, {}, 2.0), ("plates, 3 x 10 x 3", plates, {}, 2.0)]
     else:
         variants = [("mixed_rain.toml as shipped", mixed, {}, 5.0), ("plates, 6 x 10 x 6", plates, {}, 5.0),
+                    ("mixed_rain.toml, 4 substeps, auto_substeps off", mixed, {"auto_substeps": False}, 5.0),
+                    ("plates, 6 x 10 x 6, 4 substeps, auto_substeps off", plates, {"auto_substeps": False}, 5.0),
                     ("mixed_rain.toml, turn_refresh 0 (the step's manifold only)", mixed, {"turn_refresh": 0.0}, 5.0),
                     ("plates, 6 x 10 x 6, turn_refresh 0", plates, {"turn_refresh": 0.0}, 5.0),
                     ("mixed_rain.toml, 8 substeps", mixed, {"substeps": 8}, 5.0),

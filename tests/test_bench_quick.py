@@ -61,6 +61,6 @@ def test_thin_rain_quick_writes_rows_and_chart(tmp_path):
     thin_rain.main(["--quick", "--seconds", "0.3", "--out-dir", str(tmp_path)])
     rows = json.loads((tmp_path / "thin_rain.json").read_text())["rows"]
     assert {(r["rain"], r["variant"]) for r in rows} == {(rain, v) for rain in ("mixed_rain.toml", "plates")
-                                                         for v in ("defaults", "turn_refresh 0")}
+                                                         for v in ("defaults", "4 substeps (auto off)")}
     assert all(r["steps_per_s"] > 0 and math.isfinite(r["deepest_m"]) and r["deepest_m"] >= 0 for r in rows)
     assert (tmp_path / "thin_rain.png").stat().st_size > 0

@@ -96,6 +96,7 @@ class SimConfig:
     solver: str = "soft_step"
     auto_substeps: bool = True  # more substeps where the tallest column would sag past column_sag
     column_sag: float = 0.0075  # [m] soft-contact sag the auto substep count keeps columns under
+    landing_depth: float = 0.01  # [m] transient depth the auto substep count keeps landings on piles under
     sleep: bool = True
     sleep_velocity: float = 0.05
     sleep_time: float = 0.5

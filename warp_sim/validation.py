@@ -368,6 +368,7 @@ SIM_SCHEMA = {
     "contact_hertz": Number(gt=0),
     "auto_substeps": Boolean(),
     "column_sag": Number(gt=0),
+    "landing_depth": Number(gt=0),
     "damping_ratio": Number(ge=0),
     "max_push_velocity": Number(gt=0),
     "restitution_threshold": Number(ge=0),
