@@ -18,7 +18,6 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainC
 from ..launch import LIGHT_CHUNK, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
-from .contact_rows import TerrainRow
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
@@ -152,14 +151,16 @@ class SoftStepSolver:
         return self._settings_value
 
     def _terrain_rows(self, model, contacts):
-        """Row storage (one per slot, packed per body; contact_rows.py) and each body's row count."""
-        rows = getattr(self, "terrain_row", None)
+        """Each body's active slots, packed at the front of its slot range (contact_rows.py), and
+        their count."""
+        rows = getattr(self, "terrain_row_slot", None)
         if rows is None or rows.shape[0] < contacts.terrain_contact_active.shape[0]:
-            self.terrain_row = wp.zeros(contacts.terrain_contact_active.shape[0], dtype=TerrainRow, device=self.device)
+            self.terrain_row_slot = wp.zeros(contacts.terrain_contact_active.shape[0], dtype=wp.int32,
+                                             device=self.device)
         counts = getattr(self, "terrain_row_count", None)
         if counts is None or counts.shape[0] < model.body_count:
             self.terrain_row_count = wp.zeros(max(model.body_count, 1), dtype=wp.int32, device=self.device)
-        return self.terrain_row, self.terrain_row_count
+        return self.terrain_row_slot, self.terrain_row_count
 
     def _impact_scratch(self, contacts):
         """Per terrain slot: the impact's normal and tangential impulses (impact.py)."""

@@ -2,7 +2,6 @@
 
 import warp as wp
 
-from .contact_rows import TerrainRow
 
 wp.set_module_options({"enable_backward": False})
 
@@ -42,7 +41,7 @@ class SolverBodies:
     solver_drift_r: wp.array(dtype=wp.mat33)
     solver_toi_shift: wp.array(dtype=wp.vec3)
     solver_impact_stamp: wp.array(dtype=wp.int32)
-    terrain_row: wp.array(dtype=TerrainRow)
+    terrain_row_slot: wp.array(dtype=wp.int32)
     terrain_row_count: wp.array(dtype=wp.int32)
     impact_normal: wp.array(dtype=float)
     impact_tangent: wp.array(dtype=wp.vec3)

@@ -113,8 +113,7 @@ def prepare_body(
             if slots.terrain_contact_active[slot] != 0:
                 arm = slots.terrain_contact_point[slot] - x_ref
                 n = slots.terrain_contact_normal[slot]
-                solver.terrain_row[start + rows] = make_terrain_row(slot, arm, n, slots.terrain_contact_depth[slot],
-                                                                    inv_mass, inv_inertia)
+                solver.terrain_row_slot[start + rows] = slot
                 rows += 1
                 warm = (slots.terrain_contact_normal_impulse[slot] * n
                         + slots.terrain_contact_tangent_impulse[slot])
@@ -123,10 +122,10 @@ def prepare_body(
     elif make_rows != 0:
         # the rows of an earlier substep still hold: warm-start from them, same impulses, same order
         for k in range(solver.terrain_row_count[i]):
-            row = solver.terrain_row[start + k]
-            warm = (slots.terrain_contact_normal_impulse[row.slot] * row.normal
-                    + slots.terrain_contact_tangent_impulse[row.slot])
-            vel = apply_impulse(vel, warm, row.arm, inv_mass, inv_inertia)
+            slot = solver.terrain_row_slot[start + k]
+            warm = (slots.terrain_contact_normal_impulse[slot] * slots.terrain_contact_normal[slot]
+                    + slots.terrain_contact_tangent_impulse[slot])
+            vel = apply_impulse(vel, warm, slots.terrain_contact_point[slot] - x_ref, inv_mass, inv_inertia)
     else:
         solver.terrain_row_count[i] = 0
         vel = warm_start_terrain(start, count, x_ref, vel, inv_mass, inv_inertia, slots.terrain_contact_active,
@@ -194,12 +193,16 @@ def sweep_body_terrain(
     # rows again until a pass moves no point by more than the convergence tolerance.
     passes = wp.where(use_bias > 0 or count == 1, 1, RELAX_PASSES)  # one point gives all back in one
     reach = wp.length(model.body_size[i])
+    inv_inertia = solver.solver_inv_inertia[i]
     for _pass in range(passes):
         before = BodyVelocity()
         before.v = v
         before.w = w
         for k in range(count):
-            row = solver.terrain_row[start + k]
+            # the row is rebuilt from its slot (contact_rows.TerrainRow says why it is not stored)
+            slot = solver.terrain_row_slot[start + k]
+            row = make_terrain_row(slot, slots.terrain_contact_point[slot] - x_ref, slots.terrain_contact_normal[slot],
+                                   slots.terrain_contact_depth[slot], inv_mass, inv_inertia)
             # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
             separation = -row.depth + wp.dot(drift_p + drift_r * row.arm, row.normal)
             vw = solve_terrain_row(row, separation, v, w, inv_mass, friction, settings.h, use_bias,
