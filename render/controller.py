@@ -54,6 +54,7 @@ PARAMS: dict[str, Param] = {
     # Simulator.update_settings
     "dt": Param("sim", "float", 1e-4, 0.1, label="time step [s]"),
     "substeps": Param("sim", "int", 1, 64),
+    "auto_substeps": Param("sim", "bool", label="more substeps where columns sag or piles are landed on"),
     "gravity": Param("sim", "vec3", -100.0, 100.0, label="gravity [m/s^2]"),
     "integrator": Param("sim", "choice", choices=tuple(INTEGRATORS)),
     "rotation": Param("sim", "choice", choices=tuple(ROTATIONS)),

@@ -201,10 +201,10 @@ class Gui:
         if imgui.collapsing_header("Physics", imgui.TreeNodeFlags_.default_open):
             self._float("dt", 1e-4, 0.05, "%.5f", log=True)
             self._int("substeps", 1, 32)
+            self._bool("auto_substeps")
             plan = getattr(sim, "substep_plan", None)
             if plan is not None and plan.substeps != plan.requested:  # auto_substeps raised it (column_sag.py)
-                imgui.text_colored(DIM_COLOR, f"running {plan.substeps} substeps: a column would sag "
-                                              f"{plan.sag_requested * 1000:.0f} mm")
+                imgui.text_colored(DIM_COLOR, f"running {plan.substeps} substeps: {plan.reason()}")
             self._vec3("gravity", 0.1)
             self._choice("integrator")
             self._choice("rotation")

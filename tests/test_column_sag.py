@@ -201,3 +201,13 @@ def test_a_layered_column_lands_within_the_landing_depth(count, gap, shape, seed
         sim.step(1)
         deepest = max(deepest, sim.pairs.probe_depth(sim.state, sim._probe))
     assert deepest < sim.config.landing_depth, f"{deepest * 1000:.1f} mm ({sim.substep_plan.describe()})"
+
+
+def test_the_plan_says_which_budget_raised_the_substeps():
+    assert column(np.ones(20)).substep_plan.reason().startswith("a column would sag")
+    assert layered_column(10, 0.5).substep_plan.reason().startswith("a landing on a pile would sink")
+    assert column(np.ones(3)).substep_plan.reason() == ""
+    # the GUI's switch reaches the plan
+    sim = layered_column(10, 0.5)
+    sim.update_settings(auto_substeps=False)
+    assert sim.substeps == 4 and sim.substep_plan.reason() == ""

@@ -424,6 +424,19 @@ def test_set_param_changes_the_simulation():
     assert len(c.recent_notes()) == 3
 
 
+def test_auto_substeps_switch_reaches_the_substep_plan():
+    """The Physics panel's auto substeps box: the shipped rain plans more substeps for its
+    landings (column_sag.py); off, it runs exactly the substeps asked for."""
+    from pathlib import Path
+
+    c = DemoController(builtin_scene(), paused=True)
+    assert c.load_scene(Path(__file__).resolve().parents[1] / "examples" / "scenes" / "mixed_rain.toml")
+    assert c.sim.substeps > c.sim.config.substeps and c.sim.substep_plan.reason()
+    assert c.set_param("auto_substeps", False) is False
+    assert c.sim.substeps == c.sim.config.substeps
+    assert c.set_param("auto_substeps", True) is True and c.sim.substeps > c.sim.config.substeps
+
+
 def test_scene_picker_loads_every_example_scene(viewer):
     """Each examples/scenes/*.toml loads through the picker's path and draws a frame."""
     from warp_sim_render.controller import list_scenes

@@ -84,6 +84,14 @@ class SubstepPlan:
         n = self.substeps if substeps is None else substeps
         return LANDING_RESIDUAL * self.landing_speed * self.landing_dt / n if self.landing_dt else 0.0
 
+    def reason(self) -> str:
+        """Why auto_substeps runs more than requested, in a few words ("" when it does not)."""
+        if self.substeps == self.requested:
+            return ""
+        if self.sag_requested > self.budget:
+            return f"a column would sag {self.sag_requested * 1000:.0f} mm"
+        return f"a landing on a pile would sink {self.landing_transient(self.requested) * 1000:.0f} mm"
+
     def describe(self) -> str:
         head = f"{self.substeps} substeps"
         if self.column_bodies < 2:
