@@ -158,14 +158,13 @@ def test_contact_solver_is_deterministic():
 
 
 @pytest.mark.parametrize("schedule", ["domains", "colors"])
-def test_rows_of_spheres_and_cubes_built_once_per_step_are_the_rows_of_every_substep(schedule, monkeypatch):
-    """A sphere's or a cube's world inverse inertia is d 1 whatever its rotation, so its contact
-    rows are built once per collision pass and reused by the other substeps (staged.prepare_body).
-    Rebuilding them every substep must give the same bits: a stale arm, normal or inertia in a
-    reused row would not."""
+def test_terrain_rows_listed_once_per_step_are_the_rows_of_every_substep(schedule, monkeypatch):
+    """Each body's active terrain slots are listed once per collision pass and the list is reused
+    by the other substeps (staged.prepare_body; the rows themselves are rebuilt by every sweep).
+    Rebuilding the list every substep must give the same bits: a stale list would not."""
     digests = []
     for reuse in (True, False):
-        monkeypatch.setattr(SoftStepSolver, "reuse_isotropic_rows", reuse)
+        monkeypatch.setattr(SoftStepSolver, "reuse_terrain_rows", reuse)
         sim = cases.terrain_drop(120, "mix", terrain=FourierTerrain(amplitude=0.3), spacing=0.9, body_contact=True,
                                  sleep=False, pair_schedule=schedule)
         sim.step(45)  # landing, tumbling and piling: rows change within steps

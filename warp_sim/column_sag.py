@@ -80,9 +80,8 @@ class SubstepPlan:
     landing_dt: float = 0.0  # the step dt the landing was planned for [s]
 
     def landing_transient(self, substeps: int | None = None) -> float:
-        """LANDING_RESIDUAL v h at ``substeps`` (default: the ones run) [m]."""
-        n = self.substeps if substeps is None else substeps
-        return LANDING_RESIDUAL * self.landing_speed * self.landing_dt / n if self.landing_dt else 0.0
+        """The deepest transient of the fastest landing at ``substeps`` (default: the ones run) [m]."""
+        return landing_transient(self.landing_speed, self.landing_dt, self.substeps if substeps is None else substeps)
 
     def reason(self) -> str:
         """Why auto_substeps runs more than requested, in a few words ("" when it does not)."""
@@ -104,21 +103,21 @@ class SubstepPlan:
         if self.substeps != self.requested and self.sag_requested > self.budget:
             text += (f" (at the {self.requested} requested: {self.sag_requested * 1000:.1f} mm, over the "
                      f"column_sag budget of {self.budget * 1000:g} mm)")
-        if self.substeps != self.requested and self.landing_transient(self.requested) > self.landing_depth:
+        landing_requested = self.landing_transient(self.requested)
+        if self.substeps != self.requested and landing_requested > self.landing_depth:
             text += (f" (at the {self.requested} requested the landing transient is "
-                     f"{self.landing_transient(self.requested) * 1000:.1f} mm, over the landing_depth budget)")
+                     f"{landing_requested * 1000:.1f} mm, over the landing_depth budget)")
         if self.sag > self.budget or self.landing_transient() > self.landing_depth:
             reason = "auto_substeps is off" if not self.auto else f"auto_substeps stops at {MAX_AUTO_SUBSTEPS}"
             text += f"; still over the budget: {reason}"
         return text
 
 
-def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarray, radius: np.ndarray | None = None):
+def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarray, radius: np.ndarray):
     """The column of the largest sag: (sum of its g-free sag terms W_above / m_pair, its bodies),
     and the longest fall onto a pile (the gaps summed up a column of LANDING_PILE bodies or more,
-    ``radius`` the volume-equivalent radii; 0 without).  Only the series is computed here;
-    multiply by g / omega^2 for metres."""
-    radius = np.zeros(len(mass)) if radius is None else radius
+    ``radius`` the volume-equivalent radii).  Only the series is computed here; multiply by
+    g / omega^2 for metres."""
     a = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     e1 = np.cross(up, a)
     e1 /= np.linalg.norm(e1)
@@ -167,6 +166,11 @@ def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarr
     return best_terms, best_count, best_fall
 
 
+def landing_transient(speed: float, dt: float, substeps: int) -> float:
+    """LANDING_RESIDUAL v h: the deepest transient of a landing at ``speed`` (module docstring)."""
+    return LANDING_RESIDUAL * speed * dt / substeps
+
+
 def volume_radius(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
     """The radius of the sphere, or the half side of the cube, of a body's volume (a box's
     cube-root mean half extent)."""
@@ -193,12 +197,11 @@ def plan_substeps(model, config, pos: np.ndarray | None = None) -> SubstepPlan:
     def sag(n: int) -> float:
         return g * terms / contact_omega(config.dt / n, config.contact_hertz) ** 2
 
-    landing = SubstepPlan(requested, requested, count, 0.0, 0.0, config.column_sag, bool(config.auto_substeps),
-                          math.sqrt(2.0 * g * fall), float(config.landing_depth), float(config.dt))
+    speed = math.sqrt(2.0 * g * fall)
     chosen = requested
     if config.auto_substeps:
-        while ((sag(chosen) > config.column_sag or landing.landing_transient(chosen) > config.landing_depth)
+        while ((sag(chosen) > config.column_sag or landing_transient(speed, config.dt, chosen) > config.landing_depth)
                and chosen < MAX_AUTO_SUBSTEPS):
             chosen += 1
     return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), config.column_sag,
-                       bool(config.auto_substeps), landing.landing_speed, landing.landing_depth, landing.landing_dt)
+                       bool(config.auto_substeps), speed, float(config.landing_depth), float(config.dt))

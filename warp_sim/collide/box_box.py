@@ -528,11 +528,11 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.
     if edge_separation > face_separation + tolerance:
         normal = sign_of(wp.dot(delta, edge_axis)) * edge_axis
         faces = edge_face_manifold(delta, rot_a, half_a, rot_b, half_b, normal, -edge_separation, pos_b, margin)
+        if faces.count >= 2 and edge_separation <= 0.0:
+            return faces
         edge = box_edge_contact(delta, rot_a, half_a, edge_a, rot_b, half_b, edge_b, normal, -edge_separation, pos_b)
         if faces.count >= 2:
-            if edge_separation > 0.0:
-                return with_nearest(faces, edge)
-            return faces
+            return with_nearest(faces, edge)  # apart: the strip may lie further than the edges
         return edge
     normal = sign_of(wp.dot(delta, face_axis)) * face_axis
     m = manifold_empty()

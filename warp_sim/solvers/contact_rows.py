@@ -53,10 +53,9 @@ class TerrainRow:
 
     Built in registers by each sweep (staged.sweep_body_terrain), never stored: a stored row is
     144 bytes a contact that every sweep reads back, against 32 for the slot index, point,
-    normal and depth it is rebuilt from (bench/byte_model.py: 60,246 to 34,329 bytes a mixed
-    body-step; the CPU also ran the 10k rain faster rebuilt).  The prepare stage packs each body's
-    active slot indices at the front of its slot range (``terrain_row_slot``), in slot order, so a
-    sweep never visits an idle slot."""
+    normal and depth it is rebuilt from (the byte model's figures are in the README).  The
+    prepare stage packs each body's active slot indices at the front of its slot range
+    (``terrain_row_slot``), in slot order, so a sweep never visits an idle slot."""
 
     slot: wp.int32  # where the accumulated impulses live
     normal: wp.vec3

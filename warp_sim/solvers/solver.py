@@ -57,9 +57,9 @@ class _LaunchSite:
 
 
 class SoftStepSolver:
-    # Contact rows of spheres and cubes are built once per collision pass (staged.prepare_body);
-    # tests turn this off to check that rebuilding them every substep changes nothing.
-    reuse_isotropic_rows = True
+    # Each body's list of active terrain slots is built once per collision pass (staged.prepare_body);
+    # tests turn this off to check that rebuilding it every substep changes nothing.
+    reuse_terrain_rows = True
 
     def __init__(self, settings: SolverSettings, gravity, device, body_count: int = 0):
         self.settings = settings
@@ -185,7 +185,7 @@ class SoftStepSolver:
         return site
 
     def _make_rows(self) -> int:
-        if self.reuse_isotropic_rows and not getattr(self, "_rebuild_rows", False):
+        if self.reuse_terrain_rows and not getattr(self, "_rebuild_rows", False):
             return MAKE_ROWS
         return MAKE_ROWS_ALWAYS
 

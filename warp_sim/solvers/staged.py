@@ -44,8 +44,8 @@ wp.set_module_options({"enable_backward": False})
 
 POINTS = 4
 
-# prepare_body's make_rows: none (the push-out baseline), per collision pass for bodies whose rows
-# cannot change within it (spheres and cubes, see prepare_body), or every substep (for tests)
+# prepare_body's make_rows: none (the push-out baseline), per collision pass (a body's active slots
+# do not change within one, see prepare_body), or every substep (terrain contacts found again, tests)
 MAKE_ROWS_NONE = 0
 MAKE_ROWS = 1
 MAKE_ROWS_ALWAYS = 2
@@ -84,9 +84,8 @@ def prepare_body(
         solver.solver_inv_inertia[i] = wp.mat33(0.0)
         return
     # A sphere or a cube has I^-1 = d 1, so R I^-1 R^T = d 1 for every orthonormal R: taken exactly,
-    # it is the same in every substep, and so are its contact rows (arms, normals and depths are
-    # fixed from the collision pass on).  Their rows are built once per collision pass.  Not under
-    # the plain matrix rotation, whose R drifts from orthonormal (R R^T != 1) by design.
+    # it is the same in every substep.  Not under the plain matrix rotation, whose R drifts from
+    # orthonormal (R R^T != 1) by design.
     body_d = model.body_inv_inertia[i]
     isotropic = settings.rotation != ROTATION_MATRIX and body_d[0] == body_d[1] and body_d[1] == body_d[2]
     inv_inertia = wp.diag(body_d)
@@ -105,9 +104,9 @@ def prepare_body(
     x_ref = solver.solver_ref_pos[i]
     start = model.body_checkpoint_start[i]
     count = model.body_checkpoint_count[i]
-    if make_rows != 0 and (reset_reference != 0 or not isotropic or make_rows == MAKE_ROWS_ALWAYS):
-        # rows and warm start in one pass over the slots (the same impulses, in the same order,
-        # as warm_start_terrain)
+    if make_rows != 0 and (reset_reference != 0 or make_rows == MAKE_ROWS_ALWAYS):
+        # the active slots listed and warm-started in one pass (the same impulses, in the same
+        # order, as warm_start_terrain); the list holds until the terrain contacts are found again
         rows = int(0)
         for slot in range(start, start + count):
             if slots.terrain_contact_active[slot] != 0:
@@ -120,7 +119,7 @@ def prepare_body(
                 vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
         solver.terrain_row_count[i] = rows
     elif make_rows != 0:
-        # the rows of an earlier substep still hold: warm-start from them, same impulses, same order
+        # the list of an earlier substep still holds: warm-start from it, same impulses, same order
         for k in range(solver.terrain_row_count[i]):
             slot = solver.terrain_row_slot[start + k]
             warm = (slots.terrain_contact_normal_impulse[slot] * slots.terrain_contact_normal[slot]
