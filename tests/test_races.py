@@ -9,22 +9,26 @@ from warp_sim.builder import Material
 from warp_sim.race_check import RaceCheck, RaceError
 
 
-def pile(**config) -> Simulator:
+def pile(top_mass=1.0, **config) -> Simulator:
     """Two boxes stacked, a ball resting against them and one falling onto them: pairs of both
-    kinds, restitution, friction and terrain contact in the first steps."""
+    kinds, restitution, friction and terrain contact in the first steps.  A ``top_mass`` 10 times
+    the bottom box's or more makes its pair walk the bottom box's terrain contacts too
+    (pair_solve.CHAIN_MASS_RATIO), writes the pair's thread must own."""
     b = ModelBuilder(Material(friction=0.6, restitution=0.3))
     b.set_terrain(PlaneTerrain())
     b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5, 0.0))
-    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.1, 1.5, 0.0))
+    b.add_box((0.5, 0.5, 0.5), top_mass, position=(0.1, 1.5, 0.0))
     b.add_sphere(0.3, 1.0, position=(0.8, 0.3, 0.0))
     b.add_sphere(0.25, 1.0, position=(0.0, 2.3, 0.1), velocity=(0.0, -2.0, 0.0))
     return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=2, sleep_time=0.05, **config))
 
 
-@pytest.mark.parametrize("schedule,capturable", [("colors", False), ("colors", True), ("domains", False)])
-def test_pair_contact_steps_have_no_races(schedule, capturable):
+@pytest.mark.parametrize("schedule,capturable,top_mass", [("colors", False, 1.0), ("colors", True, 1.0),
+                                                         ("domains", False, 1.0), ("colors", False, 50.0),
+                                                         ("domains", False, 50.0)])
+def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass):
     """``capturable``: launches sized by capacities and bounds, as a captured step sizes them."""
-    sim = pile(pair_schedule=schedule)
+    sim = pile(top_mass, pair_schedule=schedule)
     sim.pairs.capturable = capturable
     sim.step()  # loads the modules outside the check
     with RaceCheck() as check:

@@ -134,7 +134,7 @@ def domain_sweep(
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
             for q in range(pair_count):
                 solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, direction)], mode, model, settings,
-                               pairs, solver, sweep, since)
+                               pairs, solver, sweep, since, slots)
         for k in range(slabs.boundary_body_count[0]):
             i = slabs.boundary_body[k]
             if integrate != 0:
@@ -154,7 +154,8 @@ def domain_sweep(
                          from_impact,
                          state_in, slots, solver)
         for k in range(pair_count):
-            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1)
+            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1,
+                           slots)
         # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
         # boundary impulse applied after the first sweep let a stack split across two slabs sag
         # 27 mm instead of 7)
@@ -191,7 +192,7 @@ def domain_sweep(
             else:
                 for k in range(pair_count):
                     solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, k, direction)], mode, model,
-                                   settings, pairs, solver, sweep, since)
+                                   settings, pairs, solver, sweep, since, slots)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
             i = slabs.domain_body[body_first + k]

@@ -7,13 +7,14 @@ overflow colour's pairs may share bodies, so one thread walks them in order.
 
 import warp as wp
 
-from ..kernel_args import BodyModel, BodyState, PairContacts
+from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
-from .contact_rows import closed_contact_bias
+from .contact_rows import closed_contact_bias, loaded_soft
 from .pair_geometry import pair_point_now
 from .soft_step import RELAX_PASSES
 from .solver_args import SolverBodies, StepSettings
+from .staged import sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
 
@@ -26,6 +27,17 @@ MODE_IMPACT = 3  # impact.py: restitution and impact friction, before the warm s
 # relax of a scene with restitution: open gaps are left to the next substep's impact stage, which
 # bounces them with their full approach speed (a relax impulse would take part of it away)
 MODE_RELAX_CLOSED = 4
+
+# A light body pressed onto its terrain contacts by a much heavier one: plain Gauss-Seidel hands the
+# heavy body's load down through the light one by about m / M of it a sweep (the light body is
+# pushed down by the pair, then stopped by the ground, then pushed again), so 1e4 kg on 1 kg needed
+# some 20 sweeps to settle.  A pair whose masses differ by CHAIN_MASS_RATIO or more walks the
+# lighter body's terrain contacts and the pair's points again, up to CHAIN_PASSES times, until a
+# pass moves neither by more than convergence_tolerance: the same equations, solved further where
+# the mass ratio makes one sweep do little.  The pair's thread owns both bodies in its launch (a
+# colour or a slab), so the lighter body's terrain slots are written by no other thread.
+CHAIN_MASS_RATIO = 10.0
+CHAIN_PASSES = 16
 
 
 @wp.struct
@@ -74,6 +86,8 @@ def solve_one_pair(
     solver: SolverBodies,
     impact_sweep: int,
     impact_since: int,
+    # Contacts in/out
+    slots: TerrainContacts,
 ):
     if mode == MODE_IMPACT:
         impact_pair(p, model, settings, pairs, solver, impact_sweep, impact_since)
@@ -112,8 +126,36 @@ def solve_one_pair(
     passes = wp.where((mode == MODE_RELAX or mode == MODE_RELAX_CLOSED) and count > 1, RELAX_PASSES, 1)
     reach_i = wp.length(model.body_size[i])
     reach_j = wp.length(model.body_size[j])
+    # the heavier body's mass where the pair's masses differ by CHAIN_MASS_RATIO or more (with
+    # gravity, contact_rows.loaded_soft damps the contact for it; from about 12 on it changes it)
+    heavy_mass = float(0.0)
+    if inv_mi > 0.0 and inv_mj > 0.0 and wp.max(inv_mi, inv_mj) >= CHAIN_MASS_RATIO * wp.min(inv_mi, inv_mj):
+        heavy_mass = 1.0 / wp.min(inv_mi, inv_mj)
+        if mode == MODE_WARM_START:
+            # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain)
+            light_body = wp.where(inv_mi > inv_mj, i, j)
+            solver.solver_load_mass[light_body] = wp.max(solver.solver_load_mass[light_body], heavy_mass)
+    chain = int(-1)  # the lighter body, when its terrain contacts are walked with the pair (CHAIN_MASS_RATIO)
+    if mode == MODE_SOLVE and heavy_mass > 0.0:
+        light = wp.where(inv_mi > inv_mj, i, j)
+        if solver.terrain_row_count[light] > 0:
+            chain = light
+            passes = CHAIN_PASSES
     for _pass in range(passes):
         before = vel
+        if chain >= 0 and _pass > 0:
+            if chain == i:
+                solver.solver_v[i] = vel.vi
+                solver.solver_w[i] = vel.wi
+                sweep_body_terrain(i, model, settings, 1, slots, solver)
+                vel.vi = solver.solver_v[i]
+                vel.wi = solver.solver_w[i]
+            else:
+                solver.solver_v[j] = vel.vj
+                solver.solver_w[j] = vel.wj
+                sweep_body_terrain(j, model, settings, 1, slots, solver)
+                vel.vj = solver.solver_v[j]
+                vel.wj = solver.solver_w[j]
         normal_total = float(0.0)
         for k in range(count):
             slot = p * POINTS + k
@@ -130,6 +172,7 @@ def solve_one_pair(
             else:
                 separation = now.separation
                 # Non-penetration
+                k_n = float(0.0)
                 bias = float(0.0)
                 mass_scale = float(1.0)
                 impulse_scale = float(0.0)
@@ -138,16 +181,21 @@ def solve_one_pair(
                         continue
                     bias = separation / settings.h
                 elif mode == MODE_SOLVE:
-                    bias = closed_contact_bias(separation, settings.h, settings.soft, settings.max_push_velocity)
-                    mass_scale = settings.soft[1]
-                    impulse_scale = settings.soft[2]
+                    soft = settings.soft
+                    if heavy_mass > 0.0:
+                        k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                        soft = loaded_soft(heavy_mass, 1.0 / k_n, settings.soft, settings.soft_load)
+                    bias = closed_contact_bias(separation, settings.h, soft, settings.max_push_velocity)
+                    mass_scale = soft[1]
+                    impulse_scale = soft[2]
                 vn = wp.dot(relative_velocity(vel, ri, rj), n)
                 old_t = pairs.pair_tangent_impulse[slot]
                 if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
                     # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no
                     # old friction to remove; the point would change nothing (contact_rows.py)
                     continue
-                k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                if k_n == 0.0:
+                    k_n = normal_mass_inverse(n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
                 lam = -(mass_scale / k_n) * (vn + bias) - impulse_scale * acc
                 new_acc = wp.max(acc + lam, 0.0)
                 pairs.pair_normal_impulse[slot] = new_acc
@@ -226,6 +274,10 @@ def warm_start_pair_side(
         return
     i = ij[0]
     j = ij[1]
+    other_inv_mass = model.body_inv_mass[ij[1 - side]]
+    if other_inv_mass > 0.0 and inv_mass >= CHAIN_MASS_RATIO * other_inv_mass:
+        # as solve_one_pair's warm start: this lighter body carries the other one
+        solver.solver_load_mass[b] = wp.max(solver.solver_load_mass[b], 1.0 / other_inv_mass)
     sign = wp.where(side == 0, 1.0, -1.0)
     inv_inertia = solver.solver_inv_inertia[b]
     v = solver.solver_v[b]
@@ -271,9 +323,11 @@ def pair_pass(
     settings: StepSettings,
     # Contacts in/out
     pairs: PairContacts,
+    slots: TerrainContacts,
     # Solver in/out
     solver: SolverBodies,
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since)
+        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since,
+                       slots)

@@ -71,6 +71,13 @@ def soft_coefficients(h: float, contact_hertz: float | None, damping_ratio: floa
     return wp.vec4(omega / a1, a2 * a3, a3, soft_depth)
 
 
+def soft_load(h: float, gravity, contact_hertz: float | None, damping_ratio: float) -> wp.vec3:
+    """StepSettings.soft_load = (h omega, zeta, 1 with gravity else 0) for contact_rows.loaded_soft."""
+    omega = 2.0 * math.pi * contact_frequency(h, contact_hertz)
+    loaded = any(float(c) != 0.0 for c in gravity)
+    return wp.vec3(h * omega, damping_ratio, 1.0 if loaded else 0.0)
+
+
 @wp.struct
 class BodyVelocity:
     """A body's velocities while it is being solved, plus its rolling-resistance accumulator."""

@@ -23,7 +23,7 @@ from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_posi
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
 from .pair_solve import MODE_IMPACT, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
-from .soft_step import soft_coefficients, solve_and_integrate
+from .soft_step import soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
@@ -73,6 +73,7 @@ class SoftStepSolver:
         self.solver_w0 = wp.zeros(n, dtype=wp.vec3, device=device)
         self.solver_inv_inertia = wp.zeros(n, dtype=wp.mat33, device=device)
         self.solver_rolling = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.solver_load_mass = wp.zeros(n, dtype=float, device=device)
         self.solver_shift_v = wp.zeros(n, dtype=wp.vec3, device=device)
         self.solver_shift_w = wp.zeros(n, dtype=wp.vec3, device=device)
         # pose at which the contacts were found, and the motion since (staged.py)
@@ -143,6 +144,7 @@ class SoftStepSolver:
             # a new instance, never a changed one: recorded launches hold a packed copy (kernel_args.py)
             v = StepSettings()
             v.gravity, v.h, v.soft = self.gravity, dt, self._soft(dt)
+            v.soft_load = soft_load(dt, self.gravity, s.contact_hertz, s.damping_ratio)
             v.integrator, v.rotation = INTEGRATORS[s.integrator], ROTATIONS[s.rotation]
             v.max_push_velocity, v.restitution_threshold = s.max_push_velocity, s.restitution_threshold
             v.convergence_tolerance = s.convergence_tolerance
@@ -243,7 +245,7 @@ class SoftStepSolver:
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
-                    a.solver], device=dev)
+                    a.slots, a.solver], device=dev)
 
         plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 

@@ -16,6 +16,7 @@ class StepSettings:
     integrator: int
     rotation: int
     soft: wp.vec4
+    soft_load: wp.vec3  # (h omega, zeta, 1 with gravity else 0): contact_rows.loaded_soft
     max_push_velocity: float
     restitution_threshold: float
     convergence_tolerance: float
@@ -33,6 +34,7 @@ class SolverBodies:
     solver_w0: wp.array(dtype=wp.vec3)
     solver_inv_inertia: wp.array(dtype=wp.mat33)
     solver_rolling: wp.array(dtype=wp.vec3)
+    solver_load_mass: wp.array(dtype=float)  # the heaviest body pressing on it (pair_solve.CHAIN_MASS_RATIO)
     solver_shift_v: wp.array(dtype=wp.vec3)
     solver_shift_w: wp.array(dtype=wp.vec3)
     solver_ref_pos: wp.array(dtype=wp.vec3)

@@ -69,6 +69,7 @@ def prepare_body(
     solver: SolverBodies,
 ):
     solver.solver_rolling[i] = wp.vec3(0.0)
+    solver.solver_load_mass[i] = 0.0  # the pairs' warm start sets it (pair_solve.CHAIN_MASS_RATIO)
     if reset_reference != 0:
         # the contacts were just found at this pose: anchors are measured from it
         solver.solver_ref_pos[i] = state_in.body_pos[i]
@@ -185,6 +186,7 @@ def sweep_body_terrain(
     v = solver.solver_v[i]
     w = solver.solver_w[i]
     rolling_impulse = solver.solver_rolling[i]
+    load_mass = solver.solver_load_mass[i]
     start = model.body_checkpoint_start[i]
     # A relax sweep takes the push-out speed back (soft_step.py).  One pass over a box's contacts
     # left 22 % of it (each point can give back only its own share of the impulse; a cube started
@@ -205,7 +207,7 @@ def sweep_body_terrain(
             # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
             separation = -row.depth + wp.dot(drift_p + drift_r * row.arm, row.normal)
             vw = solve_terrain_row(row, separation, v, w, inv_mass, friction, settings.h, use_bias,
-                                   settings.soft, settings.max_push_velocity,
+                                   settings.soft, settings.max_push_velocity, load_mass, settings.soft_load,
                                    slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
             w = wp.spatial_top(vw)
             v = wp.spatial_bottom(vw)
