@@ -64,3 +64,27 @@ def test_thin_rain_quick_writes_rows_and_chart(tmp_path):
                                                          for v in ("defaults", "4 substeps (auto off)")}
     assert all(r["steps_per_s"] > 0 and math.isfinite(r["deepest_m"]) and r["deepest_m"] >= 0 for r in rows)
     assert (tmp_path / "thin_rain.png").stat().st_size > 0
+
+
+def test_versions_runs_two_revisions_back_to_back(tmp_path):
+    """bench/versions.py unpacks a revision with git archive and times it against the working tree
+    in fresh processes; every run gives a speed and a depth, and the chart is written."""
+    import csv
+
+    from bench import versions
+
+    assert versions.main(["--revs", "HEAD", versions.WORKTREE, "--count", "40", "--repeats", "1", "--settle",
+                          "0.1", "--steps", "2", "--variants", "defaults", "--out-dir", str(tmp_path)]) == 0
+    rows = list(csv.DictReader((tmp_path / "versions.csv").open()))
+    assert [r["rev"] for r in rows] == ["HEAD", versions.WORKTREE]
+    assert all(r["status"] == "ok" and float(r["steps_per_s"]) > 0 for r in rows)
+    assert (tmp_path / "versions.png").stat().st_size > 0
+
+
+def test_versions_names_a_revision_git_cannot_find(tmp_path, capsys):
+    from bench import versions
+
+    with pytest.raises(SystemExit):
+        versions.main(["--revs", "no-such-revision-xyz", "--out-dir", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert "--revs" in err and "no-such-revision-xyz" in err

@@ -1,0 +1,176 @@
+"""Speed and accuracy of two (or more) revisions of this repository, timed back to back.
+
+    python bench/versions.py                                   # 96114bb against the working tree
+    python bench/versions.py --revs 96114bb HEAD --repeats 3 --count 10000
+
+Speed figures taken months apart on shared machines do not compare (this host's own runs swing
+by 20 %), so a speed goal such as "within 10 % of the figure when the issue was filed" is judged
+here: each revision is unpacked from git (``git archive``, the working tree for ``WORKTREE``), and
+the same rain as ``bench/rain.py`` (``cases.terrain_drop(N, "mix", body_contact=True)``, dt 1/60
+with 4 substeps, grid broad phase, contacts once per step, slab schedule, sleeping off) runs in a
+fresh process per run, revisions alternating, ``--repeats`` times.  Each run reports the deepest
+body penetration probed every 0.1 s while the rain lands (``--settle`` s) and steps/s over the
+next ``--steps`` steps, so speed is always charted against the accuracy it bought.
+
+A revision also runs its named variants (``VARIANTS``: SimConfig fields) when its SimConfig has
+those fields; an older revision without them runs its defaults only.  Writes
+``bench/results/versions.{csv,json,png}`` (or ``--out-dir``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tarfile
+import tempfile
+from io import BytesIO
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from bench.common import RESULTS, machine_info, write_rows  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+WORKTREE = "WORKTREE"
+
+# the default, and the mid-step passes a user may turn off for speed (README: contacts found once
+# per step; the refresh of turned pairs and the re-collision of outrun bodies)
+VARIANTS = {
+    "defaults": {},
+    "no mid-step passes": {"turn_refresh": 0.0, "recollide_outrun": False},
+}
+
+# runs in the child process, with the revision's tree first on sys.path
+CHILD = r"""
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import warp as wp
+wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING
+from warp_sim import SimConfig, cases
+count, settle, steps = int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+config = json.loads(sys.argv[5])
+known = set(SimConfig.__dataclass_fields__)
+if not set(config) <= known:
+    print(json.dumps({"status": "variant not in this revision"}))
+    raise SystemExit
+sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase="grid", spacing=0.9, sleep=False,
+                         rolling_resistance=0.2, contact_update="step", pair_schedule="domains", **config)
+sim.step(1)
+peak = 0.0
+for _ in range(int(round(settle * 10))):
+    sim.step(6, check=False)
+    peak = max(peak, sim.max_penetration())
+start = time.perf_counter()
+sim.step(steps, check=False)
+wall = time.perf_counter() - start
+sim.check_finite()
+print(json.dumps({"status": "ok", "steps_per_s": steps / wall, "peak_penetration_m": peak,
+                  "substeps": getattr(sim, "substeps", 4)}))
+"""
+
+
+def unpack(rev: str, into: Path) -> Path:
+    """The tree of ``rev`` under ``into`` (the working tree itself for WORKTREE)."""
+    if rev == WORKTREE:
+        return ROOT
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", rev], check=True,
+                          capture_output=True).stdout
+    target = into / rev.replace("/", "_")
+    target.mkdir(parents=True)
+    with tarfile.open(fileobj=BytesIO(data)) as tar:
+        tar.extractall(target, filter="data")
+    return target
+
+
+def run_once(tree: Path, count: int, settle: float, steps: int, config: dict) -> dict:
+    out = subprocess.run([sys.executable, "-c", CHILD, str(tree), str(count), str(settle), str(steps),
+                          json.dumps(config)], capture_output=True, text=True)
+    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
+    if out.returncode != 0 or not lines:
+        return {"status": f"failed: {(out.stderr.strip().splitlines() or ['no output'])[-1]}"}
+    return json.loads(lines[-1])
+
+
+def chart(rows: list[dict], path: Path, title: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    palette = plt.get_cmap("tab10").colors
+    keys = list(dict.fromkeys((r["rev"], r["variant"]) for r in rows if r["status"] == "ok"))
+    for k, (rev, variant) in enumerate(keys):
+        ok = [r for r in rows if (r["rev"], r["variant"]) == (rev, variant) and r["status"] == "ok"]
+        speeds = [r["steps_per_s"] for r in ok]
+        depths = [1000 * r["peak_penetration_m"] for r in ok]
+        ax.scatter(speeds, depths, color=palette[k % len(palette)], label=f"{rev}: {variant}", s=28)
+        ax.plot([min(speeds), max(speeds)], [sum(depths) / len(depths)] * 2, color=palette[k % len(palette)], lw=1)
+    ax.set_xlabel("steps / s (dt 1/60, 4 substeps; each dot one run)")
+    ax.set_ylabel("peak penetration while landing [mm]")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--revs", nargs="+", default=["96114bb", WORKTREE],
+                   help=f"git revisions ({WORKTREE}: the working tree as it is)")
+    p.add_argument("--count", type=int, default=10000)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--settle", type=float, default=1.5, help="simulated seconds while the rain lands")
+    p.add_argument("--steps", type=int, default=40)
+    p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    p.add_argument("--out-dir", type=Path, default=RESULTS)
+    args = p.parse_args(argv)
+    if args.count < 1 or args.repeats < 1 or args.steps < 1 or args.settle < 0:
+        p.error(f"--count, --repeats and --steps must be >= 1 and --settle >= 0, got {args.count}, "
+                f"{args.repeats}, {args.steps}, {args.settle}")
+    import warp as wp
+
+    wp.config.quiet = True
+    meta = machine_info("cpu")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        trees = {}
+        for rev in args.revs:
+            try:
+                trees[rev] = unpack(rev, Path(tmp))
+            except subprocess.CalledProcessError as err:
+                p.error(f"--revs: git cannot archive {rev!r}: {err.stderr.decode().strip()}")
+        total = args.repeats * len(args.revs) * len(args.variants)
+        done = 0
+        for repeat in range(args.repeats):
+            for rev in args.revs:  # alternating, so a slow spell of the machine hits every revision
+                for variant in args.variants:
+                    result = run_once(trees[rev], args.count, args.settle, args.steps, VARIANTS[variant])
+                    done += 1
+                    if result["status"] == "variant not in this revision":
+                        continue
+                    row = {"rev": rev, "variant": variant, "repeat": repeat, "bodies": args.count,
+                           "steps_per_s": round(result.get("steps_per_s", 0.0), 3),
+                           "peak_penetration_m": round(result.get("peak_penetration_m", 0.0), 6),
+                           "substeps": result.get("substeps", ""), "status": result["status"]}
+                    rows.append(row)
+                    print(f"[{done}/{total}] {rev:>10s} {variant:20s} {row['steps_per_s']:7.2f} steps/s  "
+                          f"peak {1000 * row['peak_penetration_m']:.1f} mm  [{row['status']}]", flush=True)
+    if not rows:
+        print("no run produced a row (every variant missing from every revision?)", file=sys.stderr)
+        return 1
+    csv_path, _ = write_rows("versions", rows, {**meta, "revs": args.revs, "settle_s": args.settle,
+                                                "steps": args.steps}, args.out_dir)
+    chart(rows, csv_path.with_suffix(".png"),
+          f"{args.count} mixed bodies raining, back to back on {meta['cpu']} ({meta['cores']} cores)")
+    print(f"wrote {csv_path} (.json, .png)")
+    return 0 if all(r["status"] == "ok" for r in rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
