@@ -56,6 +56,7 @@ from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bi
 from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.pair_refresh import refresh_turned
+from .solvers.soft_step import RELAX_PASSES
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
@@ -88,6 +89,7 @@ class SimConfig:
     seed: int = 0
     iterations: int = 2
     relax_iterations: int = 1
+    relax_passes: int = RELAX_PASSES  # passes a relax sweep may take over one body's or one pair's own points
     contact_hertz: float | None = None  # None: 1/(4 h), 60 Hz at the defaults; a number caps it
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
@@ -126,6 +128,7 @@ class SimConfig:
             rotation=self.rotation,
             iterations=self.iterations,
             relax_iterations=self.relax_iterations,
+            relax_passes=self.relax_passes,
             contact_hertz=self.contact_hertz,
             damping_ratio=self.damping_ratio,
             max_push_velocity=self.max_push_velocity,

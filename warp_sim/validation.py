@@ -365,6 +365,7 @@ SIM_SCHEMA = {
     "seed": Integer(ge=0),
     "iterations": Integer(ge=1),
     "relax_iterations": Integer(ge=0),
+    "relax_passes": Integer(ge=1),
     "contact_hertz": Number(gt=0),
     "auto_substeps": Boolean(),
     "column_sag": Number(gt=0),

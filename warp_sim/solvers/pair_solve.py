@@ -12,7 +12,6 @@ from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .contact_rows import closed_contact_bias, loaded_soft
 from .pair_geometry import pair_point_now
-from .soft_step import RELAX_PASSES
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
 
@@ -123,7 +122,7 @@ def solve_one_pair(
 
     # a relax walks the pair's own points again until a pass moves nothing (staged.sweep_body_terrain
     # says why: one pass gives back only part of the push-out speed)
-    passes = wp.where((mode == MODE_RELAX or mode == MODE_RELAX_CLOSED) and count > 1, RELAX_PASSES, 1)
+    passes = wp.where((mode == MODE_RELAX or mode == MODE_RELAX_CLOSED) and count > 1, settings.relax_passes, 1)
     reach_i = wp.length(model.body_size[i])
     reach_j = wp.length(model.body_size[j])
     # the heavier body's mass where the pair's masses differ by CHAIN_MASS_RATIO or more (with

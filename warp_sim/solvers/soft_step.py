@@ -56,7 +56,10 @@ wp.set_module_options({"enable_backward": False})
 # once a pass changes no point's velocity by more than convergence_tolerance.  A cube 2 cm deep
 # without gravity kept 22 % of its push-out speed after 1 pass, 1 % after 2; thin plates pushed
 # out of a box 3 times heavier at the capped 3 m/s (contact_rows.closed_contact_bias) needed up to
-# 16 (tests/test_push_out.py).  Passes past the first run only where a push is being taken back.
+# 16 (tests/test_push_out.py).  The default of SimConfig.relax_passes: with the tolerance of 1e-5 m/s
+# a box resting in a pile takes most of them too, so the 10k rain's relax sweeps cost about 1.7x
+# those of a single pass; relax_passes = 1 (Box2D's) is the faster choice that leaves part of a
+# push behind (bench/versions.py charts both).
 RELAX_PASSES = 16
 
 
@@ -378,7 +381,7 @@ def solve_and_integrate(
         shift_v = step
         shift_r = drift_rotation(model.body_shape[i], rot_new, rot)
         # a box's points give back their push speed in several passes (staged.sweep_body_terrain)
-        relax_sweeps = wp.where(count > 1, settings.relax_iterations * RELAX_PASSES, settings.relax_iterations)
+        relax_sweeps = wp.where(count > 1, settings.relax_iterations * settings.relax_passes, settings.relax_iterations)
         for _it in range(relax_sweeps):
             before = vel
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,

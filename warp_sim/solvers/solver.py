@@ -23,7 +23,7 @@ from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_posi
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
 from .pair_solve import MODE_IMPACT, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
-from .soft_step import soft_coefficients, soft_load, solve_and_integrate
+from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
@@ -43,6 +43,7 @@ class SolverSettings:
     rotation: str = "quaternion"
     iterations: int = 2
     relax_iterations: int = 1
+    relax_passes: int = RELAX_PASSES
     contact_hertz: float | None = None  # None: a quarter of the substep rate (column_sag.contact_hertz)
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
@@ -139,7 +140,7 @@ class SoftStepSolver:
         s = self.settings
         key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio, s.soft_depth,
                s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.iterations,
-               s.relax_iterations)
+               s.relax_iterations, s.relax_passes)
         if getattr(self, "_settings_key", None) != key:
             # a new instance, never a changed one: recorded launches hold a packed copy (kernel_args.py)
             v = StepSettings()
@@ -149,6 +150,7 @@ class SoftStepSolver:
             v.max_push_velocity, v.restitution_threshold = s.max_push_velocity, s.restitution_threshold
             v.convergence_tolerance = s.convergence_tolerance
             v.iterations, v.relax_iterations = s.iterations, s.relax_iterations
+            v.relax_passes = s.relax_passes
             self._settings_key, self._settings_value = key, v
         return self._settings_value
 

@@ -22,6 +22,7 @@ class StepSettings:
     convergence_tolerance: float
     iterations: int
     relax_iterations: int
+    relax_passes: int
 
 
 @wp.struct

@@ -37,7 +37,7 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import make_terrain_row, solve_terrain_row
-from .soft_step import RELAX_PASSES, BodyVelocity, sweep_converged, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
+from .soft_step import BodyVelocity, sweep_converged, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -192,7 +192,7 @@ def sweep_body_terrain(
     # left 22 % of it (each point can give back only its own share of the impulse; a cube started
     # 2 cm deep without gravity then drifted off at 0.077 m/s), so a relax walks the body's own
     # rows again until a pass moves no point by more than the convergence tolerance.
-    passes = wp.where(use_bias > 0 or count == 1, 1, RELAX_PASSES)  # one point gives all back in one
+    passes = wp.where(use_bias > 0 or count == 1, 1, settings.relax_passes)  # one point gives all back in one
     reach = wp.length(model.body_size[i])
     inv_inertia = solver.solver_inv_inertia[i]
     for _pass in range(passes):
