@@ -6,6 +6,7 @@ import numpy as np
 import warp as wp
 
 from .contacts import Contacts
+from .solvers.pair_solve import CHAIN_MASS_RATIO
 from .state import State
 from .terrain import Terrain, terrain_model_fields
 
@@ -53,6 +54,10 @@ class Model:
         sphere_radius = np.where(host["body_shape"] == 0, host["body_size"][:, 0], 0.0)
         self.body_sphere_radius = wp.array(sphere_radius.astype(np.float32), dtype=float, device=device)
         self.has_restitution = bool(np.any(host["body_restitution"] > 0.0))
+        # dynamic masses 10-fold apart: the colour schedule then runs the heavy-on-light chain
+        # passes (solvers/pair_solve.chain_pass, CHAIN_MASS_RATIO), which a scene without pays nothing for
+        inv_mass = host["body_inv_mass"][host["body_inv_mass"] > 0.0]
+        self.has_mass_ratio = bool(inv_mass.size and inv_mass.max() >= CHAIN_MASS_RATIO * inv_mass.min())
         self.body_checkpoint_start = arr("body_checkpoint_start", wp.int32)
         self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)
         self.checkpoint_body = arr("checkpoint_body", wp.int32)

@@ -36,8 +36,8 @@ import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import IMPACT_INNER, impact_begin_body, impact_terrain_body
-from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, solve_one_pair,
-                         warm_start_pair_side)
+from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
+                         solve_one_pair, warm_start_pair_side)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
@@ -133,8 +133,10 @@ def domain_sweep(
             since = impact_sweep_since(impact_round, 1, u)
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
             for q in range(pair_count):
-                solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, q, direction)], mode, model, settings,
-                               pairs, solver, sweep, since, slots)
+                p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
+                solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
+                if mode == MODE_SOLVE:
+                    chain_pair(p, model, settings, pairs, slots, solver)
         for k in range(slabs.boundary_body_count[0]):
             i = slabs.boundary_body[k]
             if integrate != 0:
@@ -154,8 +156,7 @@ def domain_sweep(
                          from_impact,
                          state_in, slots, solver)
         for k in range(pair_count):
-            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1,
-                           slots)
+            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1)
         # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
         # boundary impulse applied after the first sweep let a stack split across two slabs sag
         # 27 mm instead of 7)
@@ -191,8 +192,10 @@ def domain_sweep(
                                            settings, use_bias, slots, solver)
             else:
                 for k in range(pair_count):
-                    solve_one_pair(slabs.domain_pair[walk(pair_first, pair_count, k, direction)], mode, model,
-                                   settings, pairs, solver, sweep, since, slots)
+                    p = slabs.domain_pair[walk(pair_first, pair_count, k, direction)]
+                    solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
+                    if mode == MODE_SOLVE:
+                        chain_pair(p, model, settings, pairs, slots, solver)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
             i = slabs.domain_body[body_first + k]

@@ -30,11 +30,12 @@ MODE_RELAX_CLOSED = 4
 # A light body pressed onto its terrain contacts by a much heavier one: plain Gauss-Seidel hands the
 # heavy body's load down through the light one by about m / M of it a sweep (the light body is
 # pushed down by the pair, then stopped by the ground, then pushed again), so 1e4 kg on 1 kg needed
-# some 20 sweeps to settle.  A pair whose masses differ by CHAIN_MASS_RATIO or more walks the
-# lighter body's terrain contacts and the pair's points again, up to CHAIN_PASSES times, until a
-# pass moves neither by more than convergence_tolerance: the same equations, solved further where
-# the mass ratio makes one sweep do little.  The pair's thread owns both bodies in its launch (a
-# colour or a slab), so the lighter body's terrain slots are written by no other thread.
+# some 20 sweeps to settle.  After its solve sweep, a pair whose masses differ by CHAIN_MASS_RATIO
+# or more walks the lighter body's terrain contacts and the pair's points again (chain_pair), up to
+# CHAIN_PASSES - 1 times, until a pass moves neither by more than convergence_tolerance: the same
+# equations, solved further where the mass ratio makes one sweep do little.  The pair's thread owns
+# both bodies in its launch (a colour or a slab), so the lighter body's terrain slots are written by
+# no other thread.
 CHAIN_MASS_RATIO = 10.0
 CHAIN_PASSES = 16
 
@@ -85,8 +86,6 @@ def solve_one_pair(
     solver: SolverBodies,
     impact_sweep: int,
     impact_since: int,
-    # Contacts in/out
-    slots: TerrainContacts,
 ):
     if mode == MODE_IMPACT:
         impact_pair(p, model, settings, pairs, solver, impact_sweep, impact_since)
@@ -134,27 +133,8 @@ def solve_one_pair(
             # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain)
             light_body = wp.where(inv_mi > inv_mj, i, j)
             solver.solver_load_mass[light_body] = wp.max(solver.solver_load_mass[light_body], heavy_mass)
-    chain = int(-1)  # the lighter body, when its terrain contacts are walked with the pair (CHAIN_MASS_RATIO)
-    if mode == MODE_SOLVE and heavy_mass > 0.0:
-        light = wp.where(inv_mi > inv_mj, i, j)
-        if solver.terrain_row_count[light] > 0:
-            chain = light
-            passes = CHAIN_PASSES
     for _pass in range(passes):
         before = vel
-        if chain >= 0 and _pass > 0:
-            if chain == i:
-                solver.solver_v[i] = vel.vi
-                solver.solver_w[i] = vel.wi
-                sweep_body_terrain(i, model, settings, 1, slots, solver)
-                vel.vi = solver.solver_v[i]
-                vel.wi = solver.solver_w[i]
-            else:
-                solver.solver_v[j] = vel.vj
-                solver.solver_w[j] = vel.wj
-                sweep_body_terrain(j, model, settings, 1, slots, solver)
-                vel.vj = solver.solver_v[j]
-                vel.wj = solver.solver_w[j]
         normal_total = float(0.0)
         for k in range(count):
             slot = p * POINTS + k
@@ -322,11 +302,74 @@ def pair_pass(
     settings: StepSettings,
     # Contacts in/out
     pairs: PairContacts,
-    slots: TerrainContacts,
     # Solver in/out
     solver: SolverBodies,
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since,
-                       slots)
+        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since)
+
+
+@wp.func
+def chain_pair(
+    p: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+):
+    """After pair p's solve sweep: where its masses differ by CHAIN_MASS_RATIO or more, walk the
+    lighter body's terrain contacts and the pair's points again, up to CHAIN_PASSES - 1 times,
+    until a pass moves neither body by more than convergence_tolerance (module comment)."""
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    if inv_mi == 0.0 or inv_mj == 0.0 or wp.max(inv_mi, inv_mj) < CHAIN_MASS_RATIO * wp.min(inv_mi, inv_mj):
+        return
+    light = wp.where(inv_mi > inv_mj, i, j)
+    if solver.terrain_row_count[light] == 0:
+        return
+    reach_i = wp.length(model.body_size[i])
+    reach_j = wp.length(model.body_size[j])
+    for _pass in range(CHAIN_PASSES - 1):
+        vi = solver.solver_v[i]
+        wi = solver.solver_w[i]
+        vj = solver.solver_v[j]
+        wj = solver.solver_w[j]
+        sweep_body_terrain(light, model, settings, 1, slots, solver)
+        solve_one_pair(p, MODE_SOLVE, model, settings, pairs, solver, 0, -1)
+        change = (wp.length(solver.solver_v[i] - vi) + wp.length(solver.solver_v[j] - vj)
+                  + reach_i * wp.length(solver.solver_w[i] - wi) + reach_j * wp.length(solver.solver_w[j] - wj))
+        if change < settings.convergence_tolerance:
+            break
+
+
+@wp.kernel
+def chain_pass(
+    tid_offset: int,
+    color: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+):
+    """chain_pair over one colour, after its solve launch: a kernel of its own, launched only for
+    scenes whose dynamic masses differ 10-fold (SoftStepSolver), so pair_pass keeps its registers
+    (the terrain sweep it inlines takes the kernel to the 255 cap on sm_90)."""
+    r = color_range(color, color_start, wp.tid() + tid_offset)
+    for index in range(r[0], r[1]):
+        chain_pair(color_pairs_sorted[index], model, settings, pairs, slots, solver)

@@ -21,7 +21,7 @@ from ..schedule.coloring import COLOR_COUNT
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
-from .pair_solve import MODE_IMPACT, pair_pass
+from .pair_solve import MODE_IMPACT, MODE_SOLVE, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -247,7 +247,11 @@ class SoftStepSolver:
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
-                    a.slots, a.solver], device=dev)
+                    a.solver], device=dev)
+                if mode == MODE_SOLVE and m.has_mass_ratio:
+                    launch(chain_pass, dim, key=self, inputs=[
+                        color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots, a.solver],
+                        device=dev)
 
         plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 
