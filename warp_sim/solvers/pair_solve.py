@@ -40,6 +40,15 @@ CHAIN_MASS_RATIO = 10.0
 CHAIN_PASSES = 16
 
 
+@wp.func
+def heavy_partner_mass(inv_mass: float, other_inv_mass: float) -> float:
+    """The other body's mass when this one is CHAIN_MASS_RATIO or more times lighter (both
+    dynamic), else 0: the load the heavy-on-light damping and chain passes are for."""
+    if other_inv_mass > 0.0 and inv_mass >= CHAIN_MASS_RATIO * other_inv_mass:
+        return 1.0 / other_inv_mass
+    return 0.0
+
+
 @wp.struct
 class PairVelocity:
     vi: wp.vec3
@@ -126,13 +135,11 @@ def solve_one_pair(
     reach_j = wp.length(model.body_size[j])
     # the heavier body's mass where the pair's masses differ by CHAIN_MASS_RATIO or more (with
     # gravity, contact_rows.loaded_soft damps the contact for it; from about 12 on it changes it)
-    heavy_mass = float(0.0)
-    if inv_mi > 0.0 and inv_mj > 0.0 and wp.max(inv_mi, inv_mj) >= CHAIN_MASS_RATIO * wp.min(inv_mi, inv_mj):
-        heavy_mass = 1.0 / wp.min(inv_mi, inv_mj)
-        if mode == MODE_WARM_START:
-            # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain)
-            light_body = wp.where(inv_mi > inv_mj, i, j)
-            solver.solver_load_mass[light_body] = wp.max(solver.solver_load_mass[light_body], heavy_mass)
+    heavy_mass = wp.max(heavy_partner_mass(inv_mi, inv_mj), heavy_partner_mass(inv_mj, inv_mi))
+    if heavy_mass > 0.0 and mode == MODE_WARM_START:
+        # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain)
+        light_body = wp.where(inv_mi > inv_mj, i, j)
+        solver.solver_load_mass[light_body] = wp.max(solver.solver_load_mass[light_body], heavy_mass)
     for _pass in range(passes):
         before = vel
         normal_total = float(0.0)
@@ -253,10 +260,10 @@ def warm_start_pair_side(
         return
     i = ij[0]
     j = ij[1]
-    other_inv_mass = model.body_inv_mass[ij[1 - side]]
-    if other_inv_mass > 0.0 and inv_mass >= CHAIN_MASS_RATIO * other_inv_mass:
+    carried = heavy_partner_mass(inv_mass, model.body_inv_mass[ij[1 - side]])
+    if carried > 0.0:
         # as solve_one_pair's warm start: this lighter body carries the other one
-        solver.solver_load_mass[b] = wp.max(solver.solver_load_mass[b], 1.0 / other_inv_mass)
+        solver.solver_load_mass[b] = wp.max(solver.solver_load_mass[b], carried)
     sign = wp.where(side == 0, 1.0, -1.0)
     inv_inertia = solver.solver_inv_inertia[b]
     v = solver.solver_v[b]
@@ -331,7 +338,7 @@ def chain_pair(
     j = ij[1]
     inv_mi = model.body_inv_mass[i]
     inv_mj = model.body_inv_mass[j]
-    if inv_mi == 0.0 or inv_mj == 0.0 or wp.max(inv_mi, inv_mj) < CHAIN_MASS_RATIO * wp.min(inv_mi, inv_mj):
+    if wp.max(heavy_partner_mass(inv_mi, inv_mj), heavy_partner_mass(inv_mj, inv_mi)) == 0.0:
         return
     light = wp.where(inv_mi > inv_mj, i, j)
     if solver.terrain_row_count[light] == 0:
