@@ -43,6 +43,12 @@ VARIANTS = {
     "fast: that and relax_passes 1": {"turn_refresh": 0.0, "recollide_outrun": False, "relax_passes": 1},
 }
 
+# Per-stage split.  This host's speed swings by up to 2x over minutes (other tenants), so one
+# profiled run says little about where a difference comes from; each run therefore also records
+# its own ms a step per stage (solve sweeps, relax sweeps, each other kernel by name, timed around
+# warp_sim.launch) and its process CPU time, and the table gives medians over the repeats.
+STAGES = ("solve sweeps", "relax sweeps", "collide_terrain")
+
 # runs in the child process, with the revision's tree first on sys.path
 CHILD = r"""
 import json, sys, time
@@ -57,6 +63,37 @@ known = set(SimConfig.__dataclass_fields__)
 if not set(config) <= known:
     print(json.dumps({"status": "variant not in this revision"}))
     raise SystemExit
+# every launch through warp_sim.launch is timed by stage (STAGE_TIMING above says why)
+import importlib, pkgutil
+import warp_sim
+import warp_sim.launch as launching
+try:
+    from warp_sim.solvers.pair_solve import MODE_RELAX, MODE_SOLVE
+    relax_modes = {MODE_RELAX, getattr(__import__("warp_sim.solvers.pair_solve", fromlist=["x"]),
+                                       "MODE_RELAX_CLOSED", MODE_RELAX)}
+except ImportError:
+    MODE_SOLVE, relax_modes = 1, {2}
+stage_s, timing = {}, [False]
+plain_launch = launching.launch
+def timed_launch(kernel, dim, inputs, device, *args, **kwargs):
+    if not timing[0]:
+        return plain_launch(kernel, dim, inputs, device, *args, **kwargs)
+    t0 = time.perf_counter()
+    plain_launch(kernel, dim, inputs, device, *args, **kwargs)
+    name = kernel.key
+    if name == "domain_sweep":  # arguments (tid_offset,) first_domain, domain_count, mode, ...
+        mode = inputs[2]
+        name = "solve sweeps" if mode == MODE_SOLVE else "relax sweeps" if mode in relax_modes else "other sweeps"
+    stage_s[name] = stage_s.get(name, 0.0) + time.perf_counter() - t0
+for info in pkgutil.walk_packages(warp_sim.__path__, "warp_sim."):
+    if info.name.endswith("__main__"):
+        continue
+    try:
+        module = importlib.import_module(info.name)
+    except Exception:
+        continue
+    if getattr(module, "launch", None) is plain_launch:
+        module.launch = timed_launch
 sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase="grid", spacing=0.9, sleep=False,
                          rolling_resistance=0.2, contact_update="step", pair_schedule="domains", **config)
 sim.step(1)
@@ -64,13 +101,44 @@ peak = 0.0
 for _ in range(int(round(settle * 10))):
     sim.step(6, check=False)
     peak = max(peak, sim.max_penetration())
+timing[0] = True
+cpu_start = time.process_time()
 start = time.perf_counter()
 sim.step(steps, check=False)
 wall = time.perf_counter() - start
+cpu = time.process_time() - cpu_start
 sim.check_finite()
+stage_ms = {k: 1000.0 * v / steps for k, v in stage_s.items()}
 print(json.dumps({"status": "ok", "steps_per_s": steps / wall, "peak_penetration_m": peak,
-                  "substeps": getattr(sim, "substeps", 4)}))
+                  "substeps": getattr(sim, "substeps", 4), "cpu_ms_per_step": 1000.0 * cpu / steps,
+                  "stage_ms": stage_ms}))
 """
+
+
+def stage_columns(stage_ms: dict, steps_per_s: float) -> dict:
+    """ms a step of the STAGES, and of everything else (wall time less those)."""
+    columns = {f"{name.replace(' ', '_')}_ms": round(stage_ms.get(name, 0.0), 2) for name in STAGES}
+    if steps_per_s > 0:
+        columns["rest_ms"] = round(1000.0 / steps_per_s - sum(stage_ms.get(name, 0.0) for name in STAGES), 2)
+    return columns
+
+
+def summary(rows: list[dict]) -> list[str]:
+    """One line per revision and variant: medians over the repeats (steps/s, CPU ms a step, stages)."""
+    import statistics
+
+    lines = []
+    keys = list(dict.fromkeys((r["rev"], r["variant"]) for r in rows if r["status"] == "ok"))
+    for rev, variant in keys:
+        ok = [r for r in rows if (r["rev"], r["variant"]) == (rev, variant) and r["status"] == "ok"]
+
+        def median(field):
+            return statistics.median(float(r.get(field, 0.0) or 0.0) for r in ok)
+
+        stages = "  ".join(f"{name} {median(name.replace(' ', '_') + '_ms'):.1f}" for name in STAGES)
+        lines.append(f"{rev:>10s} {variant:30s} {median('steps_per_s'):6.2f} steps/s  cpu {median('cpu_ms_per_step'):6.1f}"
+                     f" ms/step  |  ms a step: {stages}  rest {median('rest_ms'):.1f}")
+    return lines
 
 
 def unpack(rev: str, into: Path) -> Path:
@@ -159,7 +227,10 @@ def main(argv=None) -> int:
                     row = {"rev": rev, "variant": variant, "repeat": repeat, "bodies": args.count,
                            "steps_per_s": round(result.get("steps_per_s", 0.0), 3),
                            "peak_penetration_m": round(result.get("peak_penetration_m", 0.0), 6),
-                           "substeps": result.get("substeps", ""), "status": result["status"]}
+                           "substeps": result.get("substeps", ""),
+                           "cpu_ms_per_step": round(result.get("cpu_ms_per_step", 0.0), 2),
+                           **stage_columns(result.get("stage_ms", {}), result.get("steps_per_s", 0.0)),
+                           "status": result["status"]}
                     rows.append(row)
                     print(f"[{done}/{total}] {rev:>10s} {variant:20s} {row['steps_per_s']:7.2f} steps/s  "
                           f"peak {1000 * row['peak_penetration_m']:.1f} mm  [{row['status']}]", flush=True)
@@ -170,6 +241,9 @@ def main(argv=None) -> int:
                                                 "steps": args.steps}, args.out_dir)
     chart(rows, csv_path.with_suffix(".png"),
           f"{args.count} mixed bodies raining, back to back on {meta['cpu']} ({meta['cores']} cores)")
+    print("medians over the repeats:")
+    for line in summary(rows):
+        print(line)
     print(f"wrote {csv_path} (.json, .png)")
     return 0 if all(r["status"] == "ok" for r in rows) else 1
 

@@ -78,6 +78,11 @@ def test_versions_runs_two_revisions_back_to_back(tmp_path):
     rows = list(csv.DictReader((tmp_path / "versions.csv").open()))
     assert [r["rev"] for r in rows] == ["HEAD", versions.WORKTREE]
     assert all(r["status"] == "ok" and float(r["steps_per_s"]) > 0 for r in rows)
+    # the per-stage split: every run timed its solve and relax sweeps, and they fit in its step
+    for r in rows:
+        stages = [float(r[f"{name.replace(' ', '_')}_ms"]) for name in versions.STAGES]
+        assert float(r["solve_sweeps_ms"]) > 0 and float(r["relax_sweeps_ms"]) > 0
+        assert sum(stages) <= 1000.0 / float(r["steps_per_s"]) and float(r["cpu_ms_per_step"]) > 0
     assert (tmp_path / "versions.png").stat().st_size > 0
 
 
