@@ -81,6 +81,7 @@ def domain_sweep(
     integrate: int,
     finalize: int,
     impact_round: int,
+    has_mass_ratio: int,
     # In
     slabs: DomainSlabs,
     # Model
@@ -135,7 +136,7 @@ def domain_sweep(
             for q in range(pair_count):
                 p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
                 solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
-                if mode == MODE_SOLVE:
+                if mode == MODE_SOLVE and has_mass_ratio != 0:
                     chain_pair(p, model, settings, pairs, slots, solver)
         for k in range(slabs.boundary_body_count[0]):
             i = slabs.boundary_body[k]
@@ -194,7 +195,7 @@ def domain_sweep(
                 for k in range(pair_count):
                     p = slabs.domain_pair[walk(pair_first, pair_count, k, direction)]
                     solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
-                    if mode == MODE_SOLVE:
+                    if mode == MODE_SOLVE and has_mass_ratio != 0:
                         chain_pair(p, model, settings, pairs, slots, solver)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):

@@ -81,7 +81,7 @@ def normal_mass_inverse(n: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv
     return inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
 
 
-@wp.func
+@wp.func(inline=True)
 def solve_one_pair(
     p: int,
     mode: int,

@@ -315,17 +315,17 @@ class SoftStepSolver:
 
         def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0, impact_round=0):
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
-                                                  impact_round, *shared], dev,
+                                                  impact_round, int(m.has_mass_ratio), *shared], dev,
                    key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize, impact_round),
                    min_chunk=1)
             if g.boundary_pairs:
                 launch(domain_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, 0, integrate, finalize,
-                                         impact_round, *shared], dev,
+                                         impact_round, int(m.has_mass_ratio), *shared], dev,
                        key=self._site(state_in, "boundary", mode, reverse, integrate, finalize, impact_round),
                        min_chunk=1)
 
         if g.static_bodies:
-            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, *shared], dev,
+            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, 0, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
         plan = substep_plan(s.iterations, s.relax_iterations, impacts)
         # the per-body stages ride on the sweeps next to them (module docstring of plan.py)
