@@ -93,3 +93,24 @@ def test_versions_names_a_revision_git_cannot_find(tmp_path, capsys):
         versions.main(["--revs", "no-such-revision-xyz", "--out-dir", str(tmp_path)])
     err = capsys.readouterr().err
     assert "--revs" in err and "no-such-revision-xyz" in err
+
+
+def test_line_profile_names_the_python_line_of_a_generated_one():
+    """bench/line_profile.py shows each generated C++ line with the source comment Warp wrote
+    above it (the nearest within a few lines), and nothing where there is none."""
+    from bench.line_profile import source_comment
+
+    cpp = ["int a;", "    // v = v + dv                                    <L 42>", "    var_3 = wp::add(var_1, var_2);",
+           "    var_4 = wp::mul(var_3, var_3);"]
+    assert source_comment(cpp, 3) == "L42: v = v + dv"
+    assert source_comment(cpp, 4) == "L42: v = v + dv"
+    assert source_comment(cpp, 1) == ""
+
+
+def test_line_profile_says_which_tool_is_missing(monkeypatch, capsys):
+    """Without perf the profile says so and exits 2, instead of a traceback."""
+    from bench import line_profile
+
+    monkeypatch.setattr(line_profile.shutil, "which", lambda tool: None if tool == "perf" else "/usr/bin/" + tool)
+    assert line_profile.main(["--count", "10", "--steps", "1"]) == 2
+    assert "perf" in capsys.readouterr().err
