@@ -332,7 +332,7 @@ def impact_terrain_body(
     solver.solver_impact_stamp[i] = impact_sweep
 
 
-@wp.func
+@wp.func(inline=True)
 def impact_pair(
     p: int,
     # Model
