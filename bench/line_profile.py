@@ -188,9 +188,8 @@ def main(argv=None) -> int:
         module_total = sum(counts.values())
         print(f"\n{module}: {module_total} samples; generated lines by samples inclusive (innermost)")
         for where, count in inclusive.most_common(args.top):
-            line = int(where.rsplit(":", 1)[1]) if where.rsplit(":", 1)[-1].isdigit() and where.endswith(
-                tuple("0123456789")) and ".cpp" in where else 0
-            comment = source_comment(cpp_lines, line) if line else ""
+            file_name, _, number = where.rpartition(":")
+            comment = source_comment(cpp_lines, int(number)) if file_name.endswith(".cpp") and number.isdigit() else ""
             print(f"{count:7d} {100 * count / module_total:5.1f} % ({innermost[where]:6d})  {where:40s} {comment}")
             rows.append({"kind": "line", "module": module, "where": where, "source": comment, "samples": count,
                          "innermost": innermost[where]})

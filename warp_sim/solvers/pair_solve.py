@@ -69,6 +69,14 @@ def apply_pair_impulse(vel: PairVelocity, impulse: wp.vec3, ri: wp.vec3, rj: wp.
 
 
 @wp.func
+def pair_change(before: PairVelocity, after: PairVelocity, reach_i: float, reach_j: float) -> float:
+    """How far a pass moved the pair's bodies: the largest speed change of a point of either body,
+    bounded by |dv| + reach |dw| (the passes stop below convergence_tolerance)."""
+    return (wp.length(after.vi - before.vi) + wp.length(after.vj - before.vj)
+            + reach_i * wp.length(after.wi - before.wi) + reach_j * wp.length(after.wj - before.wj))
+
+
+@wp.func
 def relative_velocity(vel: PairVelocity, ri: wp.vec3, rj: wp.vec3) -> wp.vec3:
     return vel.vi + wp.cross(vel.wi, ri) - vel.vj - wp.cross(vel.wj, rj)
 
@@ -203,9 +211,7 @@ def solve_one_pair(
                 pairs.pair_tangent_impulse[slot] = new_t
                 vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
                 normal_total = normal_total + new_acc
-        change = (wp.length(vel.vi - before.vi) + wp.length(vel.vj - before.vj) + reach_i * wp.length(vel.wi - before.wi)
-                  + reach_j * wp.length(vel.wj - before.wj))
-        if change < settings.convergence_tolerance:
+        if pair_change(before, vel, reach_i, reach_j) < settings.convergence_tolerance:
             break
 
     if rolling_arm > 0.0 and count == 1 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
@@ -346,15 +352,19 @@ def chain_pair(
     reach_i = wp.length(model.body_size[i])
     reach_j = wp.length(model.body_size[j])
     for _pass in range(CHAIN_PASSES - 1):
-        vi = solver.solver_v[i]
-        wi = solver.solver_w[i]
-        vj = solver.solver_v[j]
-        wj = solver.solver_w[j]
+        before = PairVelocity()
+        before.vi = solver.solver_v[i]
+        before.wi = solver.solver_w[i]
+        before.vj = solver.solver_v[j]
+        before.wj = solver.solver_w[j]
         sweep_body_terrain(light, model, settings, 1, slots, solver)
         solve_one_pair(p, MODE_SOLVE, model, settings, pairs, solver, 0, -1)
-        change = (wp.length(solver.solver_v[i] - vi) + wp.length(solver.solver_v[j] - vj)
-                  + reach_i * wp.length(solver.solver_w[i] - wi) + reach_j * wp.length(solver.solver_w[j] - wj))
-        if change < settings.convergence_tolerance:
+        after = PairVelocity()
+        after.vi = solver.solver_v[i]
+        after.wi = solver.solver_w[i]
+        after.vj = solver.solver_v[j]
+        after.wj = solver.solver_w[j]
+        if pair_change(before, after, reach_i, reach_j) < settings.convergence_tolerance:
             break
 
 
