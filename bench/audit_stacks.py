@@ -256,6 +256,9 @@ def thin_box_rains() -> tuple[dict, dict]:
     return mixed, plates
 
 
+HELD_OUT_SEEDS = (16, 17, 18, 19, 20)
+
+
 def thin_box_rain(quick: bool) -> list[dict]:
     rows = []
     mixed, plates = thin_box_rains()
@@ -269,16 +272,26 @@ def thin_box_rain(quick: bool) -> list[dict]:
                     ("plates, 6 x 10 x 6, 4 substeps, auto_substeps off", plates, {"auto_substeps": False}, 5.0),
                     ("mixed_rain.toml, turn_refresh 0 (the step's manifold only)", mixed, {"turn_refresh": 0.0}, 5.0),
                     ("plates, 6 x 10 x 6, turn_refresh 0", plates, {"turn_refresh": 0.0}, 5.0),
-                    ("mixed_rain.toml, 8 substeps", mixed, {"substeps": 8}, 5.0),
-                    ("plates, 6 x 10 x 6, 8 substeps", plates, {"substeps": 8}, 5.0),
-                    ("plates, 6 x 10 x 6, contacts every substep", plates, {"contact_update": "substep"}, 5.0),
-                    ("plates, 6 x 10 x 6, 8 substeps, every substep", plates,
-                     {"contact_update": "substep", "substeps": 8}, 5.0)]
+                    # the substeps planned before the landing calibration of column_sag.py
+                    ("mixed_rain.toml, 7 substeps, auto_substeps off", mixed,
+                     {"substeps": 7, "auto_substeps": False}, 5.0),
+                    ("plates, 6 x 10 x 6, 7 substeps, auto_substeps off", plates,
+                     {"substeps": 7, "auto_substeps": False}, 5.0),
+                    ("plates, 6 x 10 x 6, contacts every substep", plates, {"contact_update": "substep"}, 5.0)]
+    if not quick:
+        # the defaults on other layouts: seeds held out from the landing calibration (column_sag.py
+        # used seeds 1 to 15), each its own row
+        for name, scene in (("mixed_rain.toml", mixed), ("plates, 6 x 10 x 6", plates)):
+            for seed in HELD_OUT_SEEDS:
+                variants.append((f"{name}, seed {seed}", {**scene, "sim": {**scene["sim"], "seed": seed}}, {}, 5.0))
     for tag, scene, changes, seconds in variants:
         scene = {**scene, "sim": {**scene["sim"], **changes}}
         # the issue's goal: body-body penetration under 1 cm at the default settings; the defaults
-        # are also probed after every step, where a transient between the 0.1 s probes shows
+        # are also probed after every step, where a transient between the 0.1 s probes shows (the
+        # other seeds only after every step, the stricter probe)
         probes = [6, 1] if not changes and not quick else [6]
+        if "seed" in tag:
+            probes = [1]
         for every in probes:
             deepest, overall = rain_depth(scene, seconds, every)
             when = "every 0.1 s" if every == 6 else "after every step"

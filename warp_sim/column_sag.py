@@ -29,10 +29,28 @@ itself: the k-th body meets the bodies stopped below it at v_k = sqrt(2 g (gap_1
 the top one fastest.  The impact stage (solvers/impact.py) stops such a blow only as far as its
 Gauss-Seidel sweeps carry it down the pile; the soft solve takes the rest and lets the contacts
 give by about that residual speed times the substep, so the deepest transient of a landing pile
-grows as v h.  Measured on the layered rains of plates (0.6 x 0.2 x 0.6 m) and of mixed boxes and
-balls in 10 layers (bench/thin_rain.py, the audit's item 11; deepest pair over 6 seeds, found
-after every step): with v the top body's landing speed, the deepest pair was 0.40 v h at 4, 6 and
-8 substeps (15.1, 8.3, 8.2 mm against 0.40 v h = 15.5, 10.3, 7.8 mm).  So the plan also keeps
+grows as v h.  Calibrated on the layered rains of plates (0.6 x 0.2 x 0.6 m, 360 bodies) and of
+mixed boxes and balls (mixed_rain.toml, 1,000 bodies), 10 layers each (bench/audit_stacks.
+thin_box_rains, the audit's item 11), layouts of seeds 1 to 15, 5 s, the deepest body-body pair
+found after every step, against v the plan's landing speed (9.24 and 10.1 m/s):
+
+    substeps   plates: worst (seeds)                 mixed: worst (seeds)
+       7       13.8 mm = 0.63 v h (1-10; 7 over 1 cm)  21.9 mm = 0.91 v h (1-10; 2 over)
+       8       12.8 mm = 0.67 v h (1-5; 4 over)        11.9 mm = 0.56 v h (1-5; 1 over)
+       9       10.9 mm = 0.64 v h (1-15; 1 over)        7.9 mm = 0.42 v h (1-10; none over)
+      10            -                                   8.1 mm = 0.48 v h (1-10; none over)
+      11        9.5 mm = 0.68 v h (1-15; none over)      -
+      12            -                                   9.5 mm = 0.68 v h (1-10; none over)
+
+The deepest pair of a seed is one rare blow (a plate's corner onto a tilted plate, a spinning
+box's edge), so it scatters from seed to seed and is not monotonic in the substeps, but the
+plates' worst stays at 0.63 to 0.68 v h from 7 to 11 substeps, and the mixed rain's reaches 0.68
+at 12: the soft contact gives by a fixed share of what the impact sweeps leave of the blow,
+times h.  LANDING_RESIDUAL is that
+envelope rounded up, 0.69 (the mixed rain's 0.91, one spinning box at 7 substeps, is far below it
+at the substeps this plans: 11 for the plates, 12 for the mixed rain).  An earlier 0.40, the worst of 6 seeds of rains a third the size, planned 7 substeps
+for both rains, where 9 of the 20 full-size runs of seeds 1-10 went deeper than 1 cm.  So the
+plan also keeps
 
     LANDING_RESIDUAL v h  <=  landing_depth      (columns of 3 bodies or more)
 
@@ -51,7 +69,7 @@ import numpy as np
 from .types import SHAPE_SPHERE
 
 MAX_AUTO_SUBSTEPS = 64
-LANDING_RESIDUAL = 0.4  # deepest transient / (v h) of a pile landed on (module docstring)
+LANDING_RESIDUAL = 0.69  # deepest transient / (v h) of a pile landed on, worst measured (module docstring)
 LANDING_PILE = 3  # bodies in a column from which a landing counts
 
 
