@@ -66,6 +66,32 @@ def test_thin_rain_quick_writes_rows_and_chart(tmp_path):
     assert (tmp_path / "thin_rain.png").stat().st_size > 0
 
 
+def test_thin_rain_runs_every_setting_on_each_layout(tmp_path):
+    """--seeds: one row per rain, setting and layout, the layouts really different scenes."""
+    import json
+
+    from bench import thin_rain
+
+    thin_rain.main(["--quick", "--seconds", "0.3", "--seeds", "1", "2", "--out-dir", str(tmp_path)])
+    rows = json.loads((tmp_path / "thin_rain.json").read_text())["rows"]
+    assert sorted((r["rain"], r["variant"], r["seed"]) for r in rows) == sorted(
+        (rain, v, s) for rain in ("mixed_rain.toml", "plates") for v in ("defaults", "4 substeps (auto off)")
+        for s in (1, 2))
+    # and a seed is another layout: the bodies start elsewhere
+    for scene in thin_rain.scenes(quick=True).values():
+        first, second = (thin_rain.build(scene, {"seed": s}).state.body_pos.numpy() for s in (1, 2))
+        assert first.shape == second.shape and not (first == second).all()
+
+
+def test_thin_rain_rejects_a_negative_seed(capsys):
+    from bench import thin_rain
+
+    with pytest.raises(SystemExit) as exit_info:
+        thin_rain.main(["--quick", "--seeds", "-1"])
+    assert exit_info.value.code == 2
+    assert "--seeds must be integers >= 0, got [-1]" in capsys.readouterr().err
+
+
 def test_versions_runs_two_revisions_back_to_back(tmp_path):
     """bench/versions.py unpacks a revision with git archive and times it against the working tree
     in fresh processes; every run gives a speed and a depth, and the chart is written."""
