@@ -46,11 +46,11 @@ The deepest pair of a seed is one rare blow (a plate's corner onto a tilted plat
 box's edge), so it scatters from seed to seed and is not monotonic in the substeps, but the
 plates' worst stays at 0.63 to 0.68 v h from 7 to 11 substeps, and the mixed rain's reaches 0.68
 at 12: the soft contact gives by a fixed share of what the impact sweeps leave of the blow,
-times h.  LANDING_RESIDUAL is that
-envelope rounded up, 0.69 (the mixed rain's 0.91, one spinning box at 7 substeps, is far below it
-at the substeps this plans: 11 for the plates, 12 for the mixed rain).  An earlier 0.40, the worst of 6 seeds of rains a third the size, planned 7 substeps
-for both rains, where 9 of the 20 full-size runs of seeds 1-10 went deeper than 1 cm.  So the
-plan also keeps
+times h.  LANDING_RESIDUAL is that envelope rounded up, 0.69 (the mixed rain's 0.91, one spinning
+box at 7 substeps, is far below it at the substeps this plans: 11 for the plates, 12 for the
+mixed rain).  An earlier 0.40, the worst of 6 seeds of rains a third the size, planned 7
+substeps for both rains, where 9 of the 20 full-size runs of seeds 1-10 went deeper than 1 cm.
+So the plan also keeps
 
     LANDING_RESIDUAL v h  <=  landing_depth      (columns of 3 bodies or more)
 
