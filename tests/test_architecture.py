@@ -165,7 +165,7 @@ def test_kernel_arguments_are_grouped_and_named_like_their_fields():
 
 def test_struct_fields_are_named_like_their_fields():
     """Every struct of arrays that a kernel or func takes (an argument group; structs of values
-    such as TerrainRow are data, not groups) groups its fields, and fields under # Model,
+    such as BodyVelocity are data, not groups) groups its fields, and fields under # Model,
     # State ..., # Contacts ... and # Solver ... are named exactly like the fields they are
     bound from (kernel_args.bind takes them by name)."""
     fields = field_names()

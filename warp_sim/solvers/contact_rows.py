@@ -1,17 +1,16 @@
-"""Contact rows: the Jacobians and effective masses of a contact, built once per substep.
+"""Contact rows: the Jacobians and effective masses of a contact, built where a sweep needs them.
 
 Within a substep the anchors' arms r (from the reference pose, see staged.py), the normal n and
-the world inverse inertia I^-1 do not change, so everything the sweeps need besides the
-velocities can be computed once and read by every sweep (Box2D v3's contact "prepare" stage):
+the world inverse inertia I^-1 do not change:
 
     normal row:    J_n = (n, r x n),              k_n = 1/m + (r x n) . I^-1 (r x n)
     tangent rows:  J_a = (t_a, r x t_a), a = 1, 2, t_1, t_2 an orthonormal basis of the plane
                    K_t = [[1/m + (r x t_a) . I^-1 (r x t_b)]]_ab           (2 x 2, symmetric)
 
-A sweep then costs two dot products per row to read the velocity along it and two scaled adds
-to apply an impulse (Delta v = lambda n / m, Delta w = lambda I^-1 (r x n), with I^-1 (r x n)
-stored), instead of rebuilding k_n and the arms' cross products every time: in a pile of boxes
-on the terrain that halved the terrain sweeps' cost.
+Box2D v3 computes these once per substep in a "prepare" stage and stores them for every sweep.
+For terrain contacts they are built again in registers by each sweep instead
+(solve_terrain_row): a stored row is 144 bytes a contact that every sweep reads back, which on
+a GPU costs more than the arithmetic, and on the CPU measured slower too (README, byte model).
 
 Friction pushes the accumulated tangential impulse against the slip direction c (a unit vector
 of the plane, in the t_1, t_2 basis) with mass 1 / (c . K_t c), then clamps it to the Coulomb
@@ -81,32 +80,6 @@ def loaded_soft(load_mass: float, normal_mass: float, soft: wp.vec4, soft_load: 
     return wp.vec4(soft[0] * (soft[1] / soft[2]) / a2, a2 * a3, a3, soft[3])
 
 
-@wp.struct
-class TerrainRow:
-    """One terrain contact's rows for the current substep (body side only: the terrain is static).
-
-    Built in registers by each sweep (staged.sweep_body_terrain), never stored: a stored row is
-    144 bytes a contact that every sweep reads back, against 32 for the slot index, point,
-    normal and depth it is rebuilt from (the byte model's figures are in the README).  The
-    prepare stage packs each body's active slot indices at the front of its slot range
-    (``terrain_row_slot``), in slot order, so a sweep never visits an idle slot."""
-
-    slot: wp.int32  # where the accumulated impulses live
-    normal: wp.vec3
-    arm: wp.vec3  # r = p - x_ref
-    depth: float
-    rn: wp.vec3  # r x n
-    inv_rn: wp.vec3  # I^-1 (r x n)
-    normal_mass: float  # 1 / k_n
-    t1: wp.vec3
-    t2: wp.vec3
-    rt1: wp.vec3  # r x t1
-    rt2: wp.vec3
-    inv_rt1: wp.vec3  # I^-1 (r x t1)
-    inv_rt2: wp.vec3
-    tangent_k: wp.vec3  # K_t as (a, b, c) = [[a, b], [b, c]]
-
-
 @wp.func
 def plane_basis_first(n: wp.vec3) -> wp.vec3:
     """A unit vector perpendicular to the unit vector n (Duff et al. 2017, "Building an
@@ -117,28 +90,6 @@ def plane_basis_first(n: wp.vec3) -> wp.vec3:
     a = -1.0 / (sign + n[2])
     b = n[0] * n[1] * a
     return wp.vec3(1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0])
-
-
-@wp.func
-def make_terrain_row(slot: int, arm: wp.vec3, n: wp.vec3, depth: float, inv_mass: float,
-                     inv_inertia: wp.mat33) -> TerrainRow:
-    row = TerrainRow()
-    row.slot = slot
-    row.normal = n
-    row.arm = arm
-    row.depth = depth
-    row.rn = wp.cross(arm, n)
-    row.inv_rn = inv_inertia * row.rn
-    row.normal_mass = 1.0 / (inv_mass + wp.dot(row.rn, row.inv_rn))
-    row.t1 = plane_basis_first(n)
-    row.t2 = wp.cross(n, row.t1)
-    row.rt1 = wp.cross(arm, row.t1)
-    row.rt2 = wp.cross(arm, row.t2)
-    row.inv_rt1 = inv_inertia * row.rt1
-    row.inv_rt2 = inv_inertia * row.rt2
-    row.tangent_k = wp.vec3(inv_mass + wp.dot(row.rt1, row.inv_rt1), wp.dot(row.rt1, row.inv_rt2),
-                            inv_mass + wp.dot(row.rt2, row.inv_rt2))
-    return row
 
 
 @wp.func
@@ -169,11 +120,14 @@ def friction_step(vt1: float, vt2: float, old_t: wp.vec3, t1: wp.vec3, t2: wp.ve
 
 @wp.func
 def solve_terrain_row(
-    row: TerrainRow,
+    slot: int,
+    arm: wp.vec3,
+    n: wp.vec3,
     separation: float,
     v: wp.vec3,
     w: wp.vec3,
     inv_mass: float,
+    inv_inertia: wp.mat33,
     friction: float,
     h: float,
     use_bias: int,
@@ -184,13 +138,20 @@ def solve_terrain_row(
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
 ) -> wp.spatial_vector:
-    """One sweep over one terrain contact: the normal row (soft_step.py gives the soft-constraint
-    algebra), then the friction block.  Returns the new (w, v) as a spatial vector."""
-    n = row.normal
-    slot = row.slot
+    """One sweep over one terrain contact (slot, arm r = p - x_ref, normal n): the normal row
+    (soft_step.py gives the soft-constraint algebra), then the friction block.  Returns the new
+    (w, v) as a spatial vector.
+
+    The rows are built here, in registers, and never stored: a stored row is 144 bytes a contact
+    that every sweep reads back, against 32 for the slot index, point, normal and depth it is
+    built from (the byte model's figures are in the README).  Each part is built only once the
+    contact is known to need it: most checkpoints of a settled box are speculative contacts that
+    stay idle (20k of 30k in the 10k rain), and they need r x n alone to find that out.  Every
+    quantity is the same expression whenever it is built, so where it is built changes no bit."""
     bias = float(0.0)
     mass_scale = float(1.0)
     impulse_scale = float(0.0)
+    rn = wp.cross(arm, n)
     if separation > 0.0:
         if use_bias < 0:
             # relax of a scene with restitution: an open gap is left to the next substep's impact
@@ -201,31 +162,40 @@ def solve_terrain_row(
         loaded = soft
         if load_mass > 0.0:
             # a much heavier body rests on this one: its ground contacts carry it (loaded_soft)
-            loaded = loaded_soft(load_mass, row.normal_mass, soft, soft_load)
+            loaded = loaded_soft(load_mass, 1.0 / (inv_mass + wp.dot(rn, inv_inertia * rn)), soft, soft_load)
         bias = closed_contact_bias(separation, h, loaded, max_push_velocity)
         mass_scale = loaded[1]
         impulse_scale = loaded[2]
     acc = terrain_contact_normal_impulse[slot]
-    vn = wp.dot(v, n) + wp.dot(w, row.rn)
+    vn = wp.dot(v, n) + wp.dot(w, rn)
     if acc == 0.0 and vn + bias >= 0.0:
         # An idle contact that stays idle: the normal impulse would stay 0, so the Coulomb disc
         # has radius 0 and friction can only remove an old tangential impulse.  With none, the
-        # sweep would change nothing; stop here.  In a settled pile most box checkpoints are
-        # such speculative contacts inside the margin (20k of 30k at 10k bodies).
+        # sweep would change nothing; stop here.
         old_t = terrain_contact_tangent_impulse[slot]
         if old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
             return wp.spatial_vector(w, v)
-    new_acc = wp.max(acc - (mass_scale * row.normal_mass) * (vn + bias) - impulse_scale * acc, 0.0)
+    # normal row: J_n = (n, r x n), k_n = 1/m + (r x n) . I^-1 (r x n)
+    inv_rn = inv_inertia * rn
+    normal_mass = 1.0 / (inv_mass + wp.dot(rn, inv_rn))
+    new_acc = wp.max(acc - (mass_scale * normal_mass) * (vn + bias) - impulse_scale * acc, 0.0)
     terrain_contact_normal_impulse[slot] = new_acc
     d = new_acc - acc
     v = v + (inv_mass * d) * n
-    w = w + d * row.inv_rn
+    w = w + d * inv_rn
 
-    vt1 = wp.dot(v, row.t1) + wp.dot(w, row.rt1)
-    vt2 = wp.dot(v, row.t2) + wp.dot(w, row.rt2)
-    f = friction_step(vt1, vt2, terrain_contact_tangent_impulse[slot], row.t1, row.t2, row.tangent_k,
-                      friction * new_acc)
-    terrain_contact_tangent_impulse[slot] = f[2] * row.t1 + f[3] * row.t2
-    v = v + inv_mass * (f[0] * row.t1 + f[1] * row.t2)
-    w = w + f[0] * row.inv_rt1 + f[1] * row.inv_rt2
+    # tangent rows: t1, t2 an orthonormal basis of the plane, K_t the 2 x 2 block (module docstring)
+    t1 = plane_basis_first(n)
+    t2 = wp.cross(n, t1)
+    rt1 = wp.cross(arm, t1)
+    rt2 = wp.cross(arm, t2)
+    inv_rt1 = inv_inertia * rt1
+    inv_rt2 = inv_inertia * rt2
+    tangent_k = wp.vec3(inv_mass + wp.dot(rt1, inv_rt1), wp.dot(rt1, inv_rt2), inv_mass + wp.dot(rt2, inv_rt2))
+    vt1 = wp.dot(v, t1) + wp.dot(w, rt1)
+    vt2 = wp.dot(v, t2) + wp.dot(w, rt2)
+    f = friction_step(vt1, vt2, terrain_contact_tangent_impulse[slot], t1, t2, tangent_k, friction * new_acc)
+    terrain_contact_tangent_impulse[slot] = f[2] * t1 + f[3] * t2
+    v = v + inv_mass * (f[0] * t1 + f[1] * t2)
+    w = w + f[0] * inv_rt1 + f[1] * inv_rt2
     return wp.spatial_vector(w, v)

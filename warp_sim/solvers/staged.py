@@ -36,7 +36,7 @@ import warp as wp
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
-from .contact_rows import make_terrain_row, solve_terrain_row
+from .contact_rows import solve_terrain_row
 from .soft_step import BodyVelocity, sweep_converged, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
 from .solver_args import SolverBodies, StepSettings
 
@@ -200,14 +200,14 @@ def sweep_body_terrain(
         before.v = v
         before.w = w
         for k in range(count):
-            # the row is rebuilt from its slot (contact_rows.TerrainRow says why it is not stored)
+            # the rows are built from the slot each time (contact_rows.solve_terrain_row says why)
             slot = solver.terrain_row_slot[start + k]
-            row = make_terrain_row(slot, slots.terrain_contact_point[slot] - x_ref, slots.terrain_contact_normal[slot],
-                                   slots.terrain_contact_depth[slot], inv_mass, inv_inertia)
+            arm = slots.terrain_contact_point[slot] - x_ref
+            n = slots.terrain_contact_normal[slot]
             # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
-            separation = -row.depth + wp.dot(drift_p + drift_r * row.arm, row.normal)
-            vw = solve_terrain_row(row, separation, v, w, inv_mass, friction, settings.h, use_bias,
-                                   settings.soft, settings.max_push_velocity, load_mass, settings.soft_load,
+            separation = -slots.terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
+            vw = solve_terrain_row(slot, arm, n, separation, v, w, inv_mass, inv_inertia, friction, settings.h,
+                                   use_bias, settings.soft, settings.max_push_velocity, load_mass, settings.soft_load,
                                    slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
             w = wp.spatial_top(vw)
             v = wp.spatial_bottom(vw)
@@ -216,8 +216,8 @@ def sweep_body_terrain(
                 vel.v = v
                 vel.w = w
                 vel.rolling_impulse = rolling_impulse
-                vel = solve_rolling(vel, row.normal, solver.solver_inv_inertia[i],
-                                    rolling * slots.terrain_contact_normal_impulse[row.slot])
+                vel = solve_rolling(vel, n, solver.solver_inv_inertia[i],
+                                    rolling * slots.terrain_contact_normal_impulse[slot])
                 w = vel.w
                 rolling_impulse = vel.rolling_impulse
         after = BodyVelocity()
