@@ -235,8 +235,8 @@ def rolling_resistance(quick: bool) -> list[dict]:
 
 # 11. Piles of thin boxes --------------------------------------------------------------------
 
-def rain_depth(scene: dict, seconds: float, probe_every: int = 6):
-    sim = parse_scene(scene, "<audit>").build("cpu")
+def rain_depth(scene: dict, seconds: float, probe_every: int = 6, device="cpu"):
+    sim = parse_scene(scene, "<audit>").build(device)
     deepest = 0.0
     for _ in range(int(round(seconds / sim.config.dt)) // probe_every):
         sim.step(probe_every)

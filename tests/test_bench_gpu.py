@@ -50,3 +50,26 @@ def test_byte_model_charges_the_struct_fields_a_kernel_names():
     charged = {a.ptr for a in byte_model.launch_arrays(prepare_bodies, [0, body_model])}
     assert body_model.body_inv_mass.ptr in charged
     assert body_model.checkpoint_local.ptr not in charged
+
+
+def test_the_device_session_dry_run_lists_the_device_tests_and_runs_the_benchmark(tmp_path):
+    """bench/gpu_session.sh, the one command a lent GPU runs, dry-run on the CPU: it finds the
+    test files whose tests take ``device`` (their cuda:0 instances are what it runs there), and
+    bench/gpu.py writes its results under OUT within the call's budget."""
+    import os
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, OUT=str(tmp_path), DEVICE="cpu", GPU_ARGS="--quick", TEST_BUDGET="60",
+               CALL_BUDGET="240")
+    out = subprocess.run(["bash", str(root / "bench" / "gpu_session.sh")], env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    listed = next(line for line in out.stdout.splitlines() if "tests on cpu:" in line)
+    for name in ("test_impacts.py", "test_contact_laws.py", "test_body_contact.py", "test_push_out.py"):
+        assert name in listed
+    assert "test_races.py" not in listed  # CPU thread chunking: no device parameter
+    assert json.loads((tmp_path / "gpu.json").read_text())["parts"]["capture"]["status"] == "ok"
+    files = [p.name for p in tmp_path.iterdir()]
+    assert len(files) <= 8  # what a device call brings back from $OUT

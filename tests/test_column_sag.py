@@ -22,13 +22,13 @@ from warp_sim.column_sag import LANDING_RESIDUAL, MAX_AUTO_SUBSTEPS, contact_ome
 G = 9.81
 
 
-def column(masses, half=0.5, x=0.0, **config):
+def column(masses, half=0.5, x=0.0, device="cpu", **config):
     b = ModelBuilder(Material(friction=0.5))
     b.set_terrain(PlaneTerrain())
     for k, m in enumerate(masses):
         b.add_box((half, half, half), float(m), position=(x, half + 2 * half * k, 0.0))
     config.setdefault("sleep", False)
-    return Simulator(b.finalize(), SimConfig(**config))
+    return Simulator(b.finalize(device), SimConfig(device=device, **config))
 
 
 def series(masses) -> float:
@@ -93,11 +93,11 @@ def test_settings_changes_plan_again():
 
 @pytest.mark.parametrize("masses", [np.ones(20), np.exp(np.random.default_rng(7).uniform(np.log(0.2), np.log(5.0), 12))],
                          ids=["20 unit cubes", "12 random masses"])
-def test_column_at_the_defaults_sinks_by_the_estimate_and_stands(masses):
+def test_column_at_the_defaults_sinks_by_the_estimate_and_stands(masses, device):
     """At 4 substeps these sag 27.6 and ~16 mm; the defaults run the substeps that keep the sag
     under 7.5 mm, and the column then stands: the top sinks by the estimate and moves sideways
     under 1 cm."""
-    sim = column(masses)
+    sim = column(masses, device=device)
     assert sim.substep_plan.sag_requested > 0.01 and sim.substep_plan.sag <= sim.config.column_sag
     top0 = sim.state.body_pos.numpy()[-1].copy()
     sim.step(60)
@@ -111,7 +111,8 @@ def test_column_at_the_defaults_sinks_by_the_estimate_and_stands(masses):
 
 # Landing on a pile ---------------------------------------------------------------------------
 
-def layered_column(count: int, gap: float, shape: str = "plate", seed: int = 0, tilt: float = 0.0, **config):
+def layered_column(count: int, gap: float, shape: str = "plate", seed: int = 0, tilt: float = 0.0,
+                   device="cpu", **config):
     """``count`` bodies one above the other, ``gap`` apart between their volume-equivalent
     spheres (column_sag.volume_radius), the lowest resting on a plane; ``tilt`` turns each by a
     random angle up to that many radians about a random horizontal axis."""
@@ -139,7 +140,7 @@ def layered_column(count: int, gap: float, shape: str = "plate", seed: int = 0, 
             b.add_box(h, 1.0, position=(0.0, y, 0.0), orientation=q)
         y += r
     config.setdefault("sleep", False)
-    return Simulator(b.finalize(), SimConfig(**config))
+    return Simulator(b.finalize(device), SimConfig(device=device, **config))
 
 
 @pytest.mark.parametrize("count, gap, shape", [(3, 0.5, "plate"), (5, 0.3, "cube"), (10, 0.45, "plate"),
@@ -191,12 +192,12 @@ def test_a_jittered_layer_missing_from_its_column_is_not_a_long_fall():
 
 @pytest.mark.parametrize("count, gap, shape, seed", [(10, 0.5, "plate", 0), (10, 0.5, "plate", 2),
                                                      (10, 0.6, "sheet", 3), (10, 0.5, "mixed", 4)])
-def test_a_layered_column_lands_within_the_landing_depth(count, gap, shape, seed):
+def test_a_layered_column_lands_within_the_landing_depth(count, gap, shape, seed, device):
     """The physical check of the plan: columns of ten plates, sheets, or plates and balls at
     random orientations rained on themselves at the planned substeps; the deepest body-body
     penetration, found after every step, stays under landing_depth.  (At the 4 substeps asked,
     the second and third went 13.0 and 12.2 mm deep; planned, all four stay under 7.5 mm.)"""
-    sim = layered_column(count, gap, shape, seed, tilt=math.pi)
+    sim = layered_column(count, gap, shape, seed, tilt=math.pi, device=device)
     assert sim.substeps > 4
     deepest = 0.0
     for _ in range(100):
@@ -215,7 +216,7 @@ def test_the_plan_says_which_budget_raised_the_substeps():
     assert sim.substeps == 4 and sim.substep_plan.reason() == ""
 
 
-def test_the_full_size_plate_rain_lands_within_the_landing_depth_at_the_defaults():
+def test_the_full_size_plate_rain_lands_within_the_landing_depth_at_the_defaults(device):
     """The layout of the plate rain (360 plates in 10 layers, bench/audit_stacks.thin_box_rains)
     that went deepest at the 7 substeps the former landing constant planned, 13.8 mm: at the
     substeps planned now (LANDING_RESIDUAL, the worst measured over 15 layouts) its deepest
@@ -224,5 +225,5 @@ def test_the_full_size_plate_rain_lands_within_the_landing_depth_at_the_defaults
     from bench.audit_stacks import rain_depth, thin_box_rains
 
     _, plates = thin_box_rains()
-    deepest, _ = rain_depth({**plates, "sim": {**plates["sim"], "seed": 9}}, 5.0, 1)
+    deepest, _ = rain_depth({**plates, "sim": {**plates["sim"], "seed": 9}}, 5.0, 1, device=device)
     assert deepest < SimConfig().landing_depth, deepest  # the scene leaves landing_depth at its default

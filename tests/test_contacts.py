@@ -19,7 +19,7 @@ def contact_omega(h: float, hertz: float | None = SimConfig().contact_hertz) -> 
 
 
 @pytest.mark.parametrize("restitution", [0.5, 0.8])
-def test_bounce_apex_ratio_is_e_squared(restitution):
+def test_bounce_apex_ratio_is_e_squared(restitution, device):
     """Dropped from H = 1 m; the first rebound apex is e^2 H.  Error budget:
     - the impact is taken at its time within the substep (impact.py: velocity v- + g t*, position
       shifted to the piecewise motion), so what remains is semi-implicit Euler's own lag: the
@@ -29,7 +29,7 @@ def test_bounce_apex_ratio_is_e_squared(restitution):
     - the soft contact's static deflection g / omega^2 shifts the rest height."""
     drop, dt, substeps = 1.0, 1.0 / 60.0, 8
     h = dt / substeps
-    sim = cases.bounce(restitution, drop_height=drop, dt=dt, substeps=substeps)
+    sim = cases.bounce(restitution, drop_height=drop, dt=dt, substeps=substeps, device=device)
     heights = []
     for _ in range(150):
         sim.step()
@@ -43,11 +43,11 @@ def test_bounce_apex_ratio_is_e_squared(restitution):
     assert apex == pytest.approx(expected, abs=tol)
 
 
-def test_sphere_rolls_down_20_degree_plane_at_five_sevenths_g_sin():
+def test_sphere_rolls_down_20_degree_plane_at_five_sevenths_g_sin(device):
     """mu = 0.5 >= 2/7 tan 20 deg, so it rolls without slipping: a = 5/7 g sin(theta).
     Symplectic Euler's velocity is exact for constant acceleration, so 2% is a loose bound
     on anything else (friction iteration, soft contact)."""
-    sim = cases.rolling_sphere(angle_deg=20.0, friction=0.5)
+    sim = cases.rolling_sphere(angle_deg=20.0, friction=0.5, device=device)
     t = 1.0
     sim.step(int(round(t / sim.config.dt)))
     down, _ = cases.slope_frame(20.0)
@@ -61,8 +61,8 @@ def test_sphere_rolls_down_20_degree_plane_at_five_sevenths_g_sin():
     assert np.linalg.norm(slip) < 0.02 * np.linalg.norm(v)
 
 
-def test_box_slides_down_30_degree_plane_at_g_sin_minus_mu_cos():
-    sim = cases.sliding_box(angle_deg=30.0, friction=0.3)
+def test_box_slides_down_30_degree_plane_at_g_sin_minus_mu_cos(device):
+    sim = cases.sliding_box(angle_deg=30.0, friction=0.3, device=device)
     t = 1.0
     sim.step(int(round(t / sim.config.dt)))
     down, _ = cases.slope_frame(30.0)
@@ -70,11 +70,11 @@ def test_box_slides_down_30_degree_plane_at_g_sin_minus_mu_cos():
     assert accel == pytest.approx(cases.sliding_acceleration(30.0, 0.3), rel=0.02)
 
 
-def test_box_below_friction_angle_stays_put():
+def test_box_below_friction_angle_stays_put(device):
     """10 deg < atan(0.3) = 16.7 deg: static friction holds.  The only allowed motion is the
     soft contact settling along the normal (g / omega^2, under 0.3 mm); along the slope it must
     not creep more than that over 3 s."""
-    sim = cases.sliding_box(angle_deg=10.0, friction=0.3)
+    sim = cases.sliding_box(angle_deg=10.0, friction=0.3, device=device)
     p0 = sim.state.body_pos.numpy()[0].copy()
     sim.step(180)
     down, _ = cases.slope_frame(10.0)
@@ -84,14 +84,14 @@ def test_box_below_friction_angle_stays_put():
 
 
 @pytest.mark.parametrize("shape", ["sphere", "box"])
-def test_bodies_dropped_on_fourier_terrain_come_to_rest_without_sinking(shape):
+def test_bodies_dropped_on_fourier_terrain_come_to_rest_without_sinking(shape, device):
     """36 bodies dropped 0.5 m onto the Fourier terrain (rolling resistance 0.2 so balls stop as
     real ones do).  After 5 s every body's KE/m is below (g h)^2 / 2, one gravity kick per substep.
     Penetration bound: the contact is a spring of angular frequency omega; a resting box corner
     (effective mass >= m/4) sags at most 4 g / omega^2, and after the speculative stop the
     touchdown speed is at most g h, which compresses it by g h / omega more."""
     terrain = FourierTerrain(amplitude=0.3)
-    sim = cases.terrain_drop(36, shape, terrain=terrain, rolling_resistance=0.2)
+    sim = cases.terrain_drop(36, shape, terrain=terrain, rolling_resistance=0.2, device=device)
     h = sim.substep_dt
     omega = contact_omega(h)
     depth_bound = 4 * G / omega**2 + G * h / omega
@@ -105,7 +105,7 @@ def test_bodies_dropped_on_fourier_terrain_come_to_rest_without_sinking(shape):
 
 
 @pytest.mark.parametrize("angle", [90.0, 45.0, 15.0])
-def test_sphere_thrown_at_20_m_s_does_not_tunnel(angle):
+def test_sphere_thrown_at_20_m_s_does_not_tunnel(angle, device):
     """dt = 1/60 and one substep: the ball moves 33 cm per step, more than its 10 cm radius.
     The speculative margin lets it stop on the surface; its centre must never go below the
     surface and the measured depth must stay under the contact bound of the rest test."""
@@ -115,7 +115,7 @@ def test_sphere_thrown_at_20_m_s_does_not_tunnel(angle):
     b.set_terrain(terrain)
     b.add_sphere(0.1, 1.0, position=(0.0, float(terrain.height(0.0, 0.0)) + 3.0, 0.0),
                  velocity=(20 * math.cos(a), -20 * math.sin(a), 0.0))
-    sim = Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=1))
+    sim = Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=1, device=device))
     omega = contact_omega(sim.substep_dt)
     for _ in range(90):
         sim.step()
@@ -124,29 +124,29 @@ def test_sphere_thrown_at_20_m_s_does_not_tunnel(angle):
         assert sim.max_penetration() < 4 * G / omega**2 + G * sim.substep_dt / omega
 
 
-def test_pair_buffer_overflow_is_reported():
+def test_pair_buffer_overflow_is_reported(device):
     """A 3 x 3 block of touching spheres has 20 candidate pairs (12 side + 8 diagonal
     neighbours within the margin); a capacity of 8 must stop the run with a clear error."""
     b = ModelBuilder()
     for i in range(3):
         for k in range(3):
             b.add_sphere(0.5, 1.0, position=(i * 1.0, 0.0, k * 1.0))
-    sim = Simulator(b.finalize(), SimConfig(gravity=(0, 0, 0), contact_max=8))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0, 0, 0), contact_max=8, device=device))
     with pytest.raises(ContactOverflowError, match=r"\d+ body-body candidate pairs found, capacity contact_max=8"):
         sim.step()
-    roomy = Simulator(b.finalize(), SimConfig(gravity=(0, 0, 0), contact_max=64))
+    roomy = Simulator(b.finalize(device), SimConfig(gravity=(0, 0, 0), contact_max=64, device=device))
     roomy.step()
 
 
-def test_non_finite_state_names_body_and_step():
+def test_non_finite_state_names_body_and_step(device):
     """Explicit Euler with an unrepaired matrix on a fast spin grows R by (1 + (h w)^2) per
     step (see test_integrate): at h w = 1 that doubles |R|^2 each step and overflows float32 by
     step ~8; the run must stop there naming the box, not carry NaN on."""
     b = ModelBuilder()
     b.add_sphere(0.1, 1.0, position=(10.0, 0.0, 0.0))  # far away: it stays finite
     b.add_box((0.1, 0.4, 0.2), 1.0, angular_velocity=(0.0, 0.0, 100.0))
-    sim = Simulator(b.finalize(), SimConfig(dt=0.01, substeps=1, integrator="explicit_euler", rotation="matrix",
-                                            gravity=(0, 0, 0)))
+    sim = Simulator(b.finalize(device), SimConfig(dt=0.01, substeps=1, integrator="explicit_euler",
+                                                  rotation="matrix", gravity=(0, 0, 0), device=device))
     with pytest.raises(NonFiniteStateError, match=r"body 1 \(box\) became non-finite at step \d+") as info:
         for _ in range(200):
             sim.step()
@@ -154,7 +154,7 @@ def test_non_finite_state_names_body_and_step():
     assert 1 <= info.value.step <= 200
 
 
-def test_slipperiness_model_is_coulomb_with_mu_one_minus_gamma():
+def test_slipperiness_model_is_coulomb_with_mu_one_minus_gamma(device):
     """SEED.md 3 clamps the friction impulse to (1 - gamma) j: gamma = 0.7 slides like mu = 0.3."""
     b = ModelBuilder(Material(friction_model="slipperiness", slipperiness=0.7))
     b.set_terrain(cases.slope_plane(30.0))
@@ -162,20 +162,20 @@ def test_slipperiness_model_is_coulomb_with_mu_one_minus_gamma():
     _, normal = cases.slope_frame(30.0)
     b.add_box((0.25, 0.25, 0.25), 1.0, position=tuple(normal * 0.25),
               orientation=(0.0, 0.0, math.sin(a / 2), math.cos(a / 2)))
-    sim = Simulator(b.finalize(), SimConfig())
+    sim = Simulator(b.finalize(device), SimConfig(device=device))
     sim.step(60)
     down, _ = cases.slope_frame(30.0)
     accel = sim.state.body_vel.numpy()[0] @ down / 1.0
     assert accel == pytest.approx(cases.sliding_acceleration(30.0, 0.3), rel=0.02)
 
 
-def test_static_body_never_moves():
+def test_static_body_never_moves(device):
     """Inverse mass and inverse inertia 0: every equation runs and has no effect (SEED.md 2)."""
     b = ModelBuilder()
     b.set_terrain(FourierTerrain())
     b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 5.0, 0.0), velocity=(1.0, 0.0, 0.0),
               angular_velocity=(0.0, 3.0, 0.0), static=True)
-    sim = Simulator(b.finalize(), SimConfig())
+    sim = Simulator(b.finalize(device), SimConfig(device=device))
     before = [a.numpy().copy() for a in sim.state.fields()]
     sim.step(30)
     for b0, a in zip(before, sim.state.fields()):

@@ -1,4 +1,4 @@
-"""CPU runs are bit-identical: run to run, and after restoring a snapshot (time travel)."""
+"""Runs on one device are bit-identical: run to run, and after restoring a snapshot (time travel)."""
 
 import hashlib
 
@@ -14,21 +14,22 @@ def state_digest(sim) -> str:
     return h.hexdigest()
 
 
-def mixed_drop():
-    return cases.terrain_drop(50, "mix", terrain=FourierTerrain(amplitude=0.4), rolling_resistance=0.1)
+def mixed_drop(device="cpu"):
+    return cases.terrain_drop(50, "mix", terrain=FourierTerrain(amplitude=0.4), rolling_resistance=0.1,
+                              device=device)
 
 
-def test_two_runs_are_bit_identical():
+def test_two_runs_are_bit_identical(device):
     digests = []
     for _ in range(2):
-        sim = mixed_drop()
+        sim = mixed_drop(device)
         sim.step(120)
         digests.append(state_digest(sim))
     assert digests[0] == digests[1]
 
 
-def test_restoring_a_snapshot_replays_bit_for_bit():
-    sim = mixed_drop()
+def test_restoring_a_snapshot_replays_bit_for_bit(device):
+    sim = mixed_drop(device)
     sim.step(60)
     snap = sim.snapshot()
     sim.step(60)

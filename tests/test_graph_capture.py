@@ -21,19 +21,20 @@ def digest(sim) -> str:
     return h.hexdigest()
 
 
-def sleeping_stack(**config) -> Simulator:
+def sleeping_stack(device="cpu", **config) -> Simulator:
     """Three boxes that settle and sleep, then a ball that lands on them at ~0.9 s and wakes them."""
     b = ModelBuilder(Material(friction=0.6, restitution=0.3))
     b.set_terrain(PlaneTerrain())
     for k in range(3):
         b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5 + k, 0.0))
     b.add_sphere(0.25, 1.0, position=(0.1, 7.0, 0.0))
-    return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep_time=0.2, pair_schedule="colors", **config))
+    return Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=4, sleep_time=0.2,
+                                                  pair_schedule="colors", device=device, **config))
 
 
-def test_captured_step_replays_bit_for_bit_with_body_contact_and_sleeping():
-    direct = sleeping_stack(graph=False)
-    captured = sleeping_stack(graph=True)
+def test_captured_step_replays_bit_for_bit_with_body_contact_and_sleeping(device):
+    direct = sleeping_stack(device, graph=False)
+    captured = sleeping_stack(device, graph=True)
     assert captured.use_graph and not direct.use_graph
     awake = []
     for k in range(80):
@@ -51,18 +52,19 @@ def test_graph_is_refused_with_the_slab_schedule():
             sleeping_stack().model, SimConfig(graph=True, pair_schedule="domains"))
 
 
-def lattice(n: int, **config) -> Simulator:
+def lattice(n: int, device="cpu", **config) -> Simulator:
     b = ModelBuilder(Material(friction=0.6))
     b.set_terrain(PlaneTerrain())
     for x in range(n):
         for y in range(n):
             for z in range(n):
                 b.add_box((0.5, 0.5, 0.5), 1.0, position=(float(x), 0.5 + y, float(z)))
-    return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=4, sleep=False, pair_schedule="colors", **config))
+    return Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=4, sleep=False, pair_schedule="colors",
+                                                  device=device, **config))
 
 
-def test_default_capacity_holds_a_10x10x10_lattice_of_touching_cubes_and_colours_it_all():
-    sim = lattice(10)
+def test_default_capacity_holds_a_10x10x10_lattice_of_touching_cubes_and_colours_it_all(device):
+    sim = lattice(10, device)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a growth would warn
         sim.step()
@@ -75,11 +77,11 @@ def test_default_capacity_holds_a_10x10x10_lattice_of_touching_cubes_and_colours
 
 
 @pytest.mark.parametrize("graph", [False, True])
-def test_pair_overflow_grows_the_buffers_and_redoes_the_step(monkeypatch, graph):
+def test_pair_overflow_grows_the_buffers_and_redoes_the_step(monkeypatch, graph, device):
     """Direct stepping grows within the step; a captured call is rerun from its saved start."""
-    reference = lattice(3)
+    reference = lattice(3, device)
     monkeypatch.setattr(simulator, "default_pair_capacity", lambda n: 16)
-    small = lattice(3, graph=graph)
+    small = lattice(3, device, graph=graph)
     assert small.pairs.capacity == 16
     with pytest.warns(RuntimeWarning, match=r"grown to \d+ pairs") as record:
         small.step(1)

@@ -17,9 +17,9 @@ G = 9.81
 H = 1.0 / 240.0  # the default substep: dt 1/60, 4 substeps
 
 
-def simulator(builder, **config):
+def simulator(builder, device="cpu", **config):
     config.setdefault("sleep", False)
-    return Simulator(builder.finalize("cpu"), SimConfig(**config))
+    return Simulator(builder.finalize(device), SimConfig(device=device, **config))
 
 
 def momentum(sim):
@@ -33,7 +33,7 @@ def angular_momentum_about_origin(sim):
 
 
 @pytest.mark.parametrize("restitution, half", [(0.3, 0.25), (0.5, 0.25), (0.8, 0.4), (0.5, 0.1)])
-def test_flat_dropped_cube_bounces_straight_to_e_squared_height(restitution, half):
+def test_flat_dropped_cube_bounces_straight_to_e_squared_height(restitution, half, device):
     """A cube dropped flat from H0 = 2 m rises to e^2 H0 without turning.  Tolerance: the impact
     is taken at its time within the substep (impact.py), so what is left is semi-implicit Euler's
     lag, e (1 + e) v0 h / 2 (the fall arrives g h / 2 slow, the rise at e v0 peaks e v0 h / 2
@@ -44,7 +44,7 @@ def test_flat_dropped_cube_bounces_straight_to_e_squared_height(restitution, hal
     b = ModelBuilder(Material(restitution=restitution, friction=0.5))
     b.set_terrain(PlaneTerrain())
     b.add_box((half, half, half), 1.0, position=(0.0, drop + half, 0.0))
-    sim = simulator(b)
+    sim = simulator(b, device)
     v0 = math.sqrt(2 * G * drop)
     apex, spin, rising = 0.0, 0.0, False
     for _ in range(300):
@@ -94,7 +94,7 @@ def discrete_bounce_apex(restitution, drop, dt, substeps, threshold):
 
 @pytest.mark.parametrize("restitution, half, drop, substeps", [
     (0.3, 0.25, 2.0, 4), (0.5, 0.1, 1.3, 4), (0.8, 0.4, 2.7, 4), (0.65, 0.3, 0.9, 2), (0.45, 0.2, 1.7, 8)])
-def test_dropped_cube_bounce_equals_its_discrete_twin(restitution, half, drop, substeps):
+def test_dropped_cube_bounce_equals_its_discrete_twin(restitution, half, drop, substeps, device):
     """The apex of a flat-dropped cube equals the float64 twin of the scheme (semi-implicit Euler
     with impacts at their time of impact), not only e^2 H within the method's error: this pins the
     time-of-impact shift and its gravity term (left out, the apex moved by up to (1 + e) v h and
@@ -103,7 +103,7 @@ def test_dropped_cube_bounce_equals_its_discrete_twin(restitution, half, drop, s
     b = ModelBuilder(Material(restitution=restitution, friction=0.5))
     b.set_terrain(PlaneTerrain())
     b.add_box((half, half, half), 1.0, position=(0.0, drop + half, 0.0))
-    sim = simulator(b, substeps=substeps)
+    sim = simulator(b, device, substeps=substeps)
     apex, rising = 0.0, False
     for _ in range(600):
         sim.step()
@@ -123,7 +123,8 @@ def test_dropped_cube_bounce_equals_its_discrete_twin(restitution, half, drop, s
 @pytest.mark.parametrize("restitution", [0.0, 0.5, 1.0])
 @pytest.mark.parametrize("friction", [0.05, 0.1, 0.3])
 @pytest.mark.parametrize("speed_x", [3.0, -1.5])
-def test_sphere_oblique_impact_follows_coulomb_with_poisson_restitution(restitution, friction, speed_x):
+def test_sphere_oblique_impact_follows_coulomb_with_poisson_restitution(restitution, friction, speed_x,
+                                                                        device):
     """Zero gravity, a solid sphere hits a plane at (v_t, -5): the normal velocity becomes e * 5, the
     tangential impulse is mu (1 + e) m v_n unless that would reverse the slip, where the sphere
     rolls away (v_t' = 5/7 v_t).  Exact per impact: the tolerance is float32 rounding."""
@@ -131,7 +132,7 @@ def test_sphere_oblique_impact_follows_coulomb_with_poisson_restitution(restitut
     b = ModelBuilder(Material(restitution=restitution, friction=friction))
     b.set_terrain(PlaneTerrain())
     b.add_sphere(0.25, 1.0, position=(0.0, 0.26, 0.0), velocity=(speed_x, -vn, 0.0))
-    sim = simulator(b, gravity=(0.0, 0.0, 0.0))
+    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0))
     sim.step(6)
     v = sim.state.body_vel.numpy()[0]
     slip_change = min(friction * (1 + restitution) * vn, 2.0 / 7.0 * abs(speed_x))
@@ -142,7 +143,7 @@ def test_sphere_oblique_impact_follows_coulomb_with_poisson_restitution(restitut
 @pytest.mark.parametrize("count", [2, 3, 5])
 @pytest.mark.parametrize("reverse", [False, True])
 @pytest.mark.parametrize("speed", [1.5, 3.0])
-def test_row_of_touching_balls_passes_the_strike_down_the_row(count, reverse, speed):
+def test_row_of_touching_balls_passes_the_strike_down_the_row(count, reverse, speed, device):
     """Newton's cradle in zero gravity, e = 1, mu = 0: impacts propagate as a sequence of two-body
     impacts (impact.py), so the last ball leaves at the striker's speed and the others stop;
     momentum and kinetic energy are kept to float32 rounding.  ``reverse`` numbers the bodies from
@@ -151,7 +152,7 @@ def test_row_of_touching_balls_passes_the_strike_down_the_row(count, reverse, sp
     order = range(count - 1, -1, -1) if reverse else range(count)
     for k in order:
         b.add_sphere(0.5, 1.0, position=(float(k), 0.0, 0.0), velocity=(speed if k == 0 else 0.0, 0.0, 0.0))
-    sim = simulator(b, gravity=(0.0, 0.0, 0.0))
+    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0))
     ke0 = sim.kinetic_energy()
     sim.step(30)
     x = sim.state.body_pos.numpy()[:, 0]
@@ -164,7 +165,7 @@ def test_row_of_touching_balls_passes_the_strike_down_the_row(count, reverse, sp
 
 @pytest.mark.parametrize("offset", [0.0, 0.1, 0.2])
 @pytest.mark.parametrize("friction", [0.0, 0.5])
-def test_cube_cube_impact_in_free_space_keeps_momenta_and_energy(offset, friction):
+def test_cube_cube_impact_in_free_space_keeps_momenta_and_energy(offset, friction, device):
     """Two cubes meet face-on (offset 0: the impact is symmetric, so no spin) or off-centre, e = 1.
     Linear and angular momentum about the origin are kept in free space whatever the friction
     (every pair impulse acts at one point for both bodies, pair_geometry.py; float32 rounding of
@@ -173,7 +174,7 @@ def test_cube_cube_impact_in_free_space_keeps_momenta_and_energy(offset, frictio
     b = ModelBuilder(Material(restitution=1.0, friction=friction))
     b.add_box((0.25, 0.25, 0.25), 1.0, position=(-0.5, offset, 0.0), velocity=(2.0, 0.0, 0.0))
     b.add_box((0.25, 0.25, 0.25), 2.0, position=(0.5, 0.0, 0.0), velocity=(-2.0, 0.0, 0.0))
-    sim = simulator(b, gravity=(0.0, 0.0, 0.0))
+    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0))
     p0, l0, ke0 = momentum(sim), angular_momentum_about_origin(sim), sim.kinetic_energy()
     sim.step(30)
     scale = 2.0 * 3.0  # |p| of the bodies
@@ -189,7 +190,7 @@ def test_cube_cube_impact_in_free_space_keeps_momenta_and_energy(offset, frictio
 
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("contact_update", ["step", "substep"])
-def test_random_impacts_keep_momentum_and_never_gain_energy(seed, contact_update):
+def test_random_impacts_keep_momentum_and_never_gain_energy(seed, contact_update, device):
     """Random spheres and boxes, masses, restitutions and frictions colliding in free space:
     total momentum and angular momentum are kept (to float32 rounding, scaled by the bodies'
     |m v| and positions of order 1 m), and kinetic energy never rises (e <= 1).  Both contact
@@ -206,7 +207,7 @@ def test_random_impacts_keep_momentum_and_never_gain_energy(seed, contact_update
         else:
             b.add_box(tuple(float(v) for v in rng.uniform(0.15, 0.35, 3)), mass, position=pos, velocity=vel,
                       restitution=e)
-    sim = simulator(b, gravity=(0.0, 0.0, 0.0), contact_update=contact_update)
+    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0), contact_update=contact_update)
     p0, l0 = momentum(sim), angular_momentum_about_origin(sim)
     ke = sim.kinetic_energy()
     scale = float(np.abs(sim.model.body_mass[:, None] * sim.state.body_vel.numpy()).sum())
@@ -223,7 +224,7 @@ def test_random_impacts_keep_momentum_and_never_gain_energy(seed, contact_update
 @pytest.mark.parametrize("shapes", ["sphere-sphere", "sphere-box", "box-box"])
 @pytest.mark.parametrize("restitution, friction", [(0.0, 0.5), (0.5, 0.5), (0.5, 0.0), (1.0, 0.9)])
 @pytest.mark.parametrize("seed", range(3))
-def test_glancing_pair_keeps_angular_momentum(shapes, restitution, friction, seed):
+def test_glancing_pair_keeps_angular_momentum(shapes, restitution, friction, seed, device):
     """Two bodies of random size, mass, spin and orientation hit off-centre in free space: the
     angular momentum about the origin is kept whatever the pair, the friction and the gap the
     contact is solved at (each impulse acts at one point for both bodies, pair_geometry.py; with
@@ -243,7 +244,7 @@ def test_glancing_pair_keeps_angular_momentum(shapes, restitution, friction, see
             b.add_sphere(float(rng.uniform(0.15, 0.4)), **args)
         else:
             b.add_box(tuple(rng.uniform(0.1, 0.4, 3)), orientation=tuple(quats[k]), **args)
-    sim = simulator(b, gravity=(0.0, 0.0, 0.0))
+    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0))
     x = sim.state.body_pos.numpy().astype(np.float64)
     p = sim.model.body_mass[:, None] * sim.state.body_vel.numpy().astype(np.float64)
     scale = float(np.abs(np.cross(x, p)).sum() + np.abs(sim.state.body_angmom.numpy()).sum())

@@ -12,15 +12,15 @@ INTEGRATORS = ["explicit_euler", "semi_implicit", "verlet", "rk4"]
 ROTATIONS = ["quaternion", "matrix", "matrix_cross", "matrix_gram_schmidt"]
 
 
-def run_projectile(integrator, dt, t_end=1.0):
-    sim = cases.projectile(integrator, dt)
+def run_projectile(integrator, dt, t_end=1.0, device="cpu"):
+    sim = cases.projectile(integrator, dt, device=device)
     steps = int(round(t_end / dt))
     sim.step(steps)
     return sim.state.body_pos.numpy()[0].astype(np.float64), steps
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_projectile_error_and_order(integrator):
+def test_projectile_error_and_order(integrator, device):
     """Kick-drift-kick with pre-kick alpha drifts with v_k* = v0 + g h (k + alpha), so
     y_n = y0 + v0 t + g h^2 (n (n - 1) / 2 + alpha n) = exact + (alpha - 1/2) g t h exactly:
     explicit Euler (alpha 0) stays high by |g| t h / 2, symplectic Euler (alpha 1) low by the same,
@@ -32,7 +32,7 @@ def test_projectile_error_and_order(integrator):
     alpha = {"explicit_euler": 0.0, "semi_implicit": 1.0, "verlet": 0.5, "rk4": 0.5}[integrator]
     errors = []
     for dt in (0.02, 0.01):
-        pos, steps = run_projectile(integrator, dt)
+        pos, steps = run_projectile(integrator, dt, device=device)
         exact = cases.projectile_exact(t)
         roundoff = 8 * steps * EPS32 * np.abs(exact).max()
         predicted = (alpha - 0.5) * g * t * dt
@@ -52,7 +52,7 @@ ORDER_CASES = [  # (integrator, order, step sizes): larger steps for higher orde
 
 
 @pytest.mark.parametrize("integrator,order,steps", ORDER_CASES)
-def test_rotation_error_order_against_float64_reference(integrator, order, steps):
+def test_rotation_error_order_against_float64_reference(integrator, order, steps, device):
     """Orientation error after 1 s of torque-free tumbling versus a float64 RK4 reference with a
     2000x finer step.  Error = C h^p (1 + O(h |omega|)); with h |omega| <= 0.25 the correction
     moves log2(e(h)/e(h/2)) by at most ~0.3, the tolerance used."""
@@ -60,7 +60,7 @@ def test_rotation_error_order_against_float64_reference(integrator, order, steps
     _, ref = cases.tumbling_reference((0.3, 0.4, 5.0), t_end, 2)
     errors = []
     for h in steps:
-        sim = cases.tumbling_box(integrator, "quaternion", h)
+        sim = cases.tumbling_box(integrator, "quaternion", h, device=device)
         sim.step(int(round(t_end / h)))
         errors.append(np.abs(sim.state.body_rot.numpy()[0] - ref[-1]).max())
     assert math.log2(errors[0] / errors[1]) == pytest.approx(order, abs=0.3)
@@ -74,7 +74,7 @@ GROWTH = {  # per-step factor of |column|^2 for R' = R + h f(R) at constant omeg
 
 
 @pytest.mark.parametrize("integrator", list(GROWTH))
-def test_unrepaired_matrix_drifts_exactly_as_predicted(integrator):
+def test_unrepaired_matrix_drifts_exactly_as_predicted(integrator, device):
     """Spin about a principal axis keeps omega constant even for a scaled R, so the raw matrix
     update multiplies the two columns normal to omega by GROWTH(x) per step: R^T R's largest
     eigenvalue is GROWTH^n.  Checked to 1% of its distance from 1 (where that is above round-off);
@@ -82,7 +82,7 @@ def test_unrepaired_matrix_drifts_exactly_as_predicted(integrator):
     h, n, omega = 0.01, 300, 5.0
     predicted = GROWTH[integrator](h * omega) ** n - 1.0
     for rotation in ROTATIONS:
-        sim = cases.tumbling_box(integrator, rotation, h, omega=(0.0, 0.0, omega))
+        sim = cases.tumbling_box(integrator, rotation, h, omega=(0.0, 0.0, omega), device=device)
         sim.step(n)
         rot = sim.state.body_rot.numpy()[0].astype(np.float64)
         eig = np.linalg.eigvalsh(rot.T @ rot)
@@ -97,7 +97,7 @@ def test_unrepaired_matrix_drifts_exactly_as_predicted(integrator):
 
 @pytest.mark.parametrize("rotation", ROTATIONS)
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_torque_free_drift_per_method(integrator, rotation):
+def test_torque_free_drift_per_method(integrator, rotation, device):
     """Over 3 s at h = 0.01 (h|omega| = 0.05): world L is the stored variable and must not move
     (round-off only); the energy error of an order-p method is O((h omega)^p omega T), so it falls
     by orders of magnitude from Euler to RK4.  Bounds: Euler < 0.5 (it gains energy, sign
@@ -108,7 +108,7 @@ def test_torque_free_drift_per_method(integrator, rotation):
     h, n = 0.01, 300
     if integrator == "explicit_euler" and rotation == "matrix":
         n = 100  # the raw matrix under Euler grows ~e^(n x^2); keep it finite for the energy check
-    sim = cases.tumbling_box(integrator, rotation, h)
+    sim = cases.tumbling_box(integrator, rotation, h, device=device)
     angmom0 = sim.state.body_angmom.numpy()[0].astype(np.float64)
     e0 = 0.5 * sim.angular_velocity()[0] @ angmom0
     sim.step(n)
@@ -127,12 +127,12 @@ def test_torque_free_drift_per_method(integrator, rotation):
         assert abs(drift) < 2 * x**4 + 1e-6
 
 
-def test_intermediate_axis_flips_and_major_axis_does_not():
+def test_intermediate_axis_flips_and_major_axis_does_not(device):
     """Dzhanibekov: a spin near the intermediate axis (z here) reverses that axis within a few
     seconds; the same perturbation about the major axis (x) stays within its small cone."""
     h, n = 0.01, 600
-    flip = cases.tumbling_box("rk4", "quaternion", h, omega=(0.3, 0.4, 5.0))
-    stable = cases.tumbling_box("rk4", "quaternion", h, omega=(5.0, 0.3, 0.4))
+    flip = cases.tumbling_box("rk4", "quaternion", h, omega=(0.3, 0.4, 5.0), device=device)
+    stable = cases.tumbling_box("rk4", "quaternion", h, omega=(5.0, 0.3, 0.4), device=device)
     min_flip, min_stable = 1.0, 1.0
     for _ in range(n):
         flip.step()
@@ -176,7 +176,7 @@ def sign_changes(values):
     return np.nonzero(s[1:] != s[:-1])[0] + 1  # sample index just after each change
 
 
-def test_default_integrator_keeps_free_rotation_energy_and_flips():
+def test_default_integrator_keeps_free_rotation_energy_and_flips(device):
     """What a user gets without choosing (SimConfig defaults: dt 1/60, 4 substeps, the default
     integrator): over 20 s the tumbling box's kinetic energy stays within 1 % (the issue's goal);
     the midpoint rule conserves it exactly, so the bound actually checked is float32 round-off,
@@ -193,8 +193,8 @@ def test_default_integrator_keeps_free_rotation_energy_and_flips():
     b = ModelBuilder()
     b.set_terrain(NoTerrain())
     b.add_box(MIDDLE_AXIS_HALF, 1.0, angular_velocity=MIDDLE_AXIS_OMEGA)
-    cfg = SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False)
-    sim = Simulator(b.finalize("cpu"), cfg)
+    cfg = SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, device=device)
+    sim = Simulator(b.finalize(device), cfg)
     t_end = 20.0
     steps = int(round(t_end / cfg.dt))
     angmom = sim.state.body_angmom.numpy()[0].astype(np.float64)
@@ -217,7 +217,7 @@ def test_default_integrator_keeps_free_rotation_energy_and_flips():
 
 
 @pytest.mark.parametrize("spin", [20.0, 60.0])
-def test_semi_implicit_energy_at_coarse_steps(spin):
+def test_semi_implicit_energy_at_coarse_steps(spin, device):
     """One substep of 1/60 s with h omega = 1/3 and 1: the Newton solve of the midpoint rule
     (error squared each iteration from (h omega)^2, 4 iterations) still converges, so the energy
     is kept to round-off, 4 n eps for n = 600 steps; explicit Euler would gain a factor
@@ -228,8 +228,8 @@ def test_semi_implicit_energy_at_coarse_steps(spin):
     b = ModelBuilder()
     b.set_terrain(NoTerrain())
     b.add_box(MIDDLE_AXIS_HALF, 1.0, angular_velocity=(0.01, spin, 0.01))
-    sim = Simulator(b.finalize("cpu"), SimConfig(dt=1 / 60, substeps=1, integrator="semi_implicit",
-                                                 gravity=(0.0, 0.0, 0.0), sleep=False))
+    sim = Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=1, integrator="semi_implicit",
+                                                  gravity=(0.0, 0.0, 0.0), sleep=False, device=device))
     e0 = sim.kinetic_energy()
     n = 600
     sim.step(n)

@@ -16,7 +16,7 @@ from warp_sim.terrain import NoTerrain
 DT = 1.0 / 60.0
 
 
-def wall_scene(radius, speed, mass_a, wall_half, phase, **config):
+def wall_scene(radius, speed, mass_a, wall_half, phase, device="cpu", **config):
     """Ball A flies at ball B resting at the origin; a static wall stands a little beyond B, so
     B, struck, reaches it within the same step.  ``phase``: the fraction of one step's travel by
     which A starts further back (which substep the strike falls in)."""
@@ -28,7 +28,7 @@ def wall_scene(radius, speed, mass_a, wall_half, phase, **config):
     wall_x = radius + gap + wall_half
     b.add_box((wall_half, 5 * radius, 5 * radius), 1.0, position=(wall_x, 0.0, 0.0), static=True)
     config.setdefault("sleep", False)
-    sim = Simulator(b.finalize("cpu"), SimConfig(dt=DT, gravity=(0.0, 0.0, 0.0), **config))
+    sim = Simulator(b.finalize(device), SimConfig(dt=DT, gravity=(0.0, 0.0, 0.0), device=device, **config))
     return sim, wall_x
 
 
@@ -40,17 +40,17 @@ def beyond_wall(sim, wall_x, steps):
 @pytest.mark.parametrize("radius, speed, mass_a, wall_half", [
     (0.1, 40.0, 1.0, 0.02), (0.028, 8.0, 1.0, 0.01), (0.1, 40.0, 3.0, 0.02), (0.05, 25.0, 0.5, 0.005),
     (0.2, 60.0, 1.0, 0.03)])
-def test_ball_struck_mid_step_never_passes_a_thin_wall(radius, speed, mass_a, wall_half):
+def test_ball_struck_mid_step_never_passes_a_thin_wall(radius, speed, mass_a, wall_half, device):
     for phase in np.linspace(0.0, 7.0 / 8.0, 8):
-        sim, wall_x = wall_scene(radius, speed, mass_a, wall_half, phase)
+        sim, wall_x = wall_scene(radius, speed, mass_a, wall_half, phase, device)
         assert not beyond_wall(sim, wall_x, 18), f"phase {phase:.3f}: a ball ended beyond the wall"
 
 
-def test_without_the_mid_step_pass_the_same_strikes_tunnel():
+def test_without_the_mid_step_pass_the_same_strikes_tunnel(device):
     """The failure the pass exists for: switched off, some phases put B through the wall."""
     through = 0
     for phase in np.linspace(0.0, 7.0 / 8.0, 8):
-        sim, wall_x = wall_scene(0.1, 40.0, 1.0, 0.02, phase, recollide_outrun=False)
+        sim, wall_x = wall_scene(0.1, 40.0, 1.0, 0.02, phase, device, recollide_outrun=False)
         through += beyond_wall(sim, wall_x, 18)
     assert through > 0
 
@@ -77,14 +77,14 @@ def elastic_line(xa, va, xb, vb, ma, radius, wall_face, t_end):
 
 
 @pytest.mark.parametrize("mass_a, phase", [(1.0, 0.0), (2.0, 0.375), (0.25, 0.625), (0.6, 0.875)])
-def test_struck_ball_ends_with_the_textbook_velocities(mass_a, phase):
+def test_struck_ball_ends_with_the_textbook_velocities(mass_a, phase, device):
     """e = 1, mu 0 everywhere: A strikes B, B meets the wall within the strike's step, comes back
     and may meet A again; the final velocities are those of elastic impacts taken one by one
     (elastic_line), and kinetic energy never rises.  Tolerance: each impact is resolved to the
     converged Poisson impulse in float32; 2 % of the strike speed covers the few-ulp error of the
     impact sweeps and a gap closed speculatively at a substep's end rather than at its instant."""
     u, radius = 40.0, 0.1
-    sim, wall_x = wall_scene(radius, u, mass_a, 0.02, phase)
+    sim, wall_x = wall_scene(radius, u, mass_a, 0.02, phase, device)
     x = sim.state.body_pos.numpy()[:, 0].astype(np.float64)
     steps = 12
     want = elastic_line(x[0], u, x[1], 0.0, mass_a, radius, wall_x - 0.02, steps * DT)
@@ -98,12 +98,12 @@ def test_struck_ball_ends_with_the_textbook_velocities(mass_a, phase):
     np.testing.assert_allclose(v, want, atol=0.02 * u)
 
 
-def test_mid_step_pass_replays_equal_under_graph_capture():
+def test_mid_step_pass_replays_equal_under_graph_capture(device):
     """The pass is a conditional node of the captured step (wp.capture_if): replaying the
     captured step equals stepping directly, bit for bit."""
     runs = []
     for graph in (False, True):
-        sim, _ = wall_scene(0.1, 40.0, 1.0, 0.02, 0.375, graph=graph, pair_schedule="colors")
+        sim, _ = wall_scene(0.1, 40.0, 1.0, 0.02, 0.375, device, graph=graph, pair_schedule="colors")
         sim.step(1)
         sim.step(10)
         runs.append((sim.state.body_pos.numpy().copy(), sim.state.body_vel.numpy().copy(),

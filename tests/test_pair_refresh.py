@@ -48,41 +48,43 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
         read_end_j[k] = pos[1] + now.arm_j
 
 
-def arrays(values, dtype):
-    return wp.array(np.asarray(values, dtype=np.int32 if dtype == wp.int32 else np.float32), dtype=dtype, device="cpu")
+def arrays(values, dtype, device="cpu"):
+    return wp.array(np.asarray(values, dtype=np.int32 if dtype == wp.int32 else np.float32), dtype=dtype,
+                    device=device)
 
 
-def refresh(case, tolerance=0.0):
+def refresh(case, tolerance=0.0, device="cpu"):
     """Stores the reference pose's manifold as the pass would, moves the bodies, runs the kernel;
     returns the stored arrays after it and the fresh contact at the current pose."""
-    shape = arrays(case["shape"], wp.int32)
-    half = arrays(case["half"], wp.vec3)
-    radius = arrays([h[0] if k == SHAPE_SPHERE else 0.0 for k, h in zip(case["shape"], case["half"])], float)
-    inv_mass = arrays(case["inv_mass"], float)
-    ref_pos, ref_rot = arrays(case["ref_pos"], wp.vec3), arrays(case["ref_rot"], wp.mat33)
-    pos, rot = arrays(case["pos"], wp.vec3), arrays(case["rot"], wp.mat33)
+    shape = arrays(case["shape"], wp.int32, device)
+    half = arrays(case["half"], wp.vec3, device)
+    radius = arrays([h[0] if k == SHAPE_SPHERE else 0.0 for k, h in zip(case["shape"], case["half"])], float,
+                    device)
+    inv_mass = arrays(case["inv_mass"], float, device)
+    ref_pos, ref_rot = arrays(case["ref_pos"], wp.vec3, device), arrays(case["ref_rot"], wp.mat33, device)
+    pos, rot = arrays(case["pos"], wp.vec3, device), arrays(case["rot"], wp.mat33, device)
     bound = arrays([h[0] if k == SHAPE_SPHERE else np.linalg.norm(h) for k, h in zip(case["shape"], case["half"])],
-                   float)
-    n = wp.zeros(1, dtype=wp.vec3, device="cpu")
-    count = wp.zeros(1, dtype=wp.int32, device="cpu")
-    points = wp.zeros(POINTS, dtype=wp.vec3, device="cpu")
-    depths = wp.zeros(POINTS, dtype=float, device="cpu")
-    scratch = [wp.zeros(POINTS, dtype=t, device="cpu") for t in (float, wp.vec3, float, wp.vec3, wp.vec3)]
-    fresh_count = wp.zeros(1, dtype=wp.int32, device="cpu")
+                   float, device)
+    n = wp.zeros(1, dtype=wp.vec3, device=device)
+    count = wp.zeros(1, dtype=wp.int32, device=device)
+    points = wp.zeros(POINTS, dtype=wp.vec3, device=device)
+    depths = wp.zeros(POINTS, dtype=float, device=device)
+    scratch = [wp.zeros(POINTS, dtype=t, device=device) for t in (float, wp.vec3, float, wp.vec3, wp.vec3)]
+    fresh_count = wp.zeros(1, dtype=wp.int32, device=device)
     # the pass at the reference pose: its manifold is stored as is (drift zero there)
-    features = wp.zeros(POINTS, dtype=wp.int32, device="cpu")
-    wp.launch(store_pass, 1, device="cpu", inputs=[shape, ref_pos, ref_rot, half, MARGIN, n, points, depths, features,
+    features = wp.zeros(POINTS, dtype=wp.int32, device=device)
+    wp.launch(store_pass, 1, device=device, inputs=[shape, ref_pos, ref_rot, half, MARGIN, n, points, depths, features,
                                                    count])
-    impulses = wp.array(np.arange(1, POINTS + 1, dtype=np.float32), dtype=float, device="cpu")
-    tangents = wp.array(np.tile(np.float32([0.1, 0.0, 0.0]), (POINTS, 1)), dtype=wp.vec3, device="cpu")
+    impulses = wp.array(np.arange(1, POINTS + 1, dtype=np.float32), dtype=float, device=device)
+    tangents = wp.array(np.tile(np.float32([0.1, 0.0, 0.0]), (POINTS, 1)), dtype=wp.vec3, device=device)
     before = {"count": count.numpy().copy(), "normal": n.numpy().copy(), "point": points.numpy().copy(),
               "depth": depths.numpy().copy(), "feature": features.numpy().copy(), "impulse": impulses.numpy().copy()}
-    refreshed = wp.zeros(1, dtype=wp.int32, device="cpu")
-    wp.launch(refresh_turned_pairs, 1, device="cpu", inputs=[
+    refreshed = wp.zeros(1, dtype=wp.int32, device=device)
+    wp.launch(refresh_turned_pairs, 1, device=device, inputs=[
         0, shape, half, bound, inv_mass, MARGIN, tolerance, pos, rot, ref_pos, ref_rot,
-        bound, arrays([1], wp.int32), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device="cpu"),
+        bound, arrays([1], wp.int32, device), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device=device),
         count, n, points, depths, features, impulses, tangents, refreshed])
-    wp.launch(fresh_and_read, 1, device="cpu", inputs=[shape, pos, rot, half, radius, inv_mass, ref_pos, ref_rot, n,
+    wp.launch(fresh_and_read, 1, device=device, inputs=[shape, pos, rot, half, radius, inv_mass, ref_pos, ref_rot, n,
                                                        points, depths, count, MARGIN, *scratch, fresh_count])
     after = {"count": count.numpy(), "normal": n.numpy(), "point": points.numpy(), "depth": depths.numpy(),
              "feature": features.numpy(), "impulse": impulses.numpy(), "refreshed": int(refreshed.numpy()[0])}
@@ -128,7 +130,7 @@ def random_case(rng, half_a, half_b, turn):
 @pytest.mark.parametrize("half_a, half_b", [((0.3, 0.1, 0.3), (0.3, 0.1, 0.3)), ((0.5, 0.5, 0.5), (0.6, 0.1, 0.4)),
                                             ((0.2,), (0.25, 0.15, 0.1))])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, half_b, seed):
+def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, half_b, seed, device):
     """For each refreshed point the solver's gap is minus the fresh depth and both arms end at
     the fresh point (float32 rounding on metre-sized bodies: 2e-5 m); the point count and order
     are the fresh manifold's; a point whose feature id survives keeps its accumulated impulse.
@@ -136,7 +138,7 @@ def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, h
     rng = np.random.default_rng(seed)
     checked = kept = 0
     for _ in range(8):
-        before, after, fresh = refresh(random_case(rng, half_a, half_b, rng.uniform(0.1, 0.4)))
+        before, after, fresh = refresh(random_case(rng, half_a, half_b, rng.uniform(0.1, 0.4)), device=device)
         assert after["refreshed"] == 1
         n = int(after["count"][0])
         assert n == fresh["count"]
@@ -152,7 +154,7 @@ def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, h
     assert checked >= 8 and kept >= 4
 
 
-def test_pairs_turned_less_than_the_tolerance_are_left_alone():
+def test_pairs_turned_less_than_the_tolerance_are_left_alone(device):
     """Below the tolerance (turn times bounding radius, summed) nothing is written, bit for bit;
     above it the pair is refreshed."""
     rng = np.random.default_rng(5)
@@ -161,9 +163,9 @@ def test_pairs_turned_less_than_the_tolerance_are_left_alone():
     for k in range(2):
         r = case["rot"][k] @ case["ref_rot"][k].T
         swing += np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1)) * np.linalg.norm(case["half"][k])
-    before, after, _ = refresh(case, tolerance=1.01 * swing)
+    before, after, _ = refresh(case, tolerance=1.01 * swing, device=device)
     assert after["refreshed"] == 0
     for key in ("count", "normal", "point", "depth", "feature", "impulse"):
         np.testing.assert_array_equal(before[key], after[key])
-    _, after, _ = refresh(case, tolerance=0.99 * swing)
+    _, after, _ = refresh(case, tolerance=0.99 * swing, device=device)
     assert after["refreshed"] == 1

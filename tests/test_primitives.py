@@ -117,35 +117,39 @@ def transformed(shape, rot, shift=(0.0, 0.0, 0.0)):
     return {**shape, "pos": rot @ shape["pos"] + np.asarray(shift), "rot": rot @ shape["rot"]}
 
 
-def vec3s(shapes, key):
-    return wp.array(np.array([s[key] for s in shapes], dtype=np.float32), dtype=wp.vec3)
+def vec3s(shapes, key, device="cpu"):
+    return wp.array(np.array([s[key] for s in shapes], dtype=np.float32), dtype=wp.vec3, device=device)
 
 
-def mat33s(shapes):
-    return wp.array(np.array([s["rot"] for s in shapes], dtype=np.float32), dtype=wp.mat33)
+def mat33s(shapes, device="cpu"):
+    return wp.array(np.array([s["rot"] for s in shapes], dtype=np.float32), dtype=wp.mat33, device=device)
 
 
-def collide(kind, pairs, margin=MARGIN):
+def collide(kind, pairs, margin=MARGIN, device="cpu"):
     """Run one kernel over a list of (A, B) pairs; returns a list of result dicts."""
     a = [p[0] for p in pairs]
     b = [p[1] for p in pairs]
-    out = wp.empty(len(pairs), dtype=Manifold)
+    out = wp.empty(len(pairs), dtype=Manifold, device=device)
     if kind == "sphere_sphere":
-        wp.launch(sphere_sphere_kernel, len(pairs),
-                  inputs=[vec3s(a, "pos"), vec3s(a, "size"), vec3s(b, "pos"), vec3s(b, "size"), margin, out])
+        wp.launch(sphere_sphere_kernel, len(pairs), device=device,
+                  inputs=[vec3s(a, "pos", device), vec3s(a, "size", device), vec3s(b, "pos", device),
+                          vec3s(b, "size", device), margin, out])
     elif kind == "sphere_box":
-        wp.launch(sphere_box_kernel, len(pairs), inputs=[vec3s(a, "pos"), vec3s(a, "size"), vec3s(b, "pos"),
-                                                         mat33s(b), vec3s(b, "size"), margin, out])
+        wp.launch(sphere_box_kernel, len(pairs), device=device,
+                  inputs=[vec3s(a, "pos", device), vec3s(a, "size", device), vec3s(b, "pos", device),
+                          mat33s(b, device), vec3s(b, "size", device), margin, out])
     elif kind == "pair":
-        shape_a = wp.array(np.array([s["shape"] for s in a], dtype=np.int32), dtype=int)
-        shape_b = wp.array(np.array([s["shape"] for s in b], dtype=np.int32), dtype=int)
-        wp.launch(pair_kernel, len(pairs), inputs=[shape_a, vec3s(a, "pos"), mat33s(a), vec3s(a, "size"),
-                                                   shape_b, vec3s(b, "pos"), mat33s(b), vec3s(b, "size"),
-                                                   margin, out])
+        shape_a = wp.array(np.array([s["shape"] for s in a], dtype=np.int32), dtype=int, device=device)
+        shape_b = wp.array(np.array([s["shape"] for s in b], dtype=np.int32), dtype=int, device=device)
+        wp.launch(pair_kernel, len(pairs), device=device,
+                  inputs=[shape_a, vec3s(a, "pos", device), mat33s(a, device), vec3s(a, "size", device),
+                          shape_b, vec3s(b, "pos", device), mat33s(b, device), vec3s(b, "size", device),
+                          margin, out])
     else:
         kernel = box_box_kernel if kind == "box_box" else box_box_thesis_kernel
-        wp.launch(kernel, len(pairs), inputs=[vec3s(a, "pos"), mat33s(a), vec3s(a, "size"), vec3s(b, "pos"),
-                                              mat33s(b), vec3s(b, "size"), margin, out])
+        wp.launch(kernel, len(pairs), device=device,
+                  inputs=[vec3s(a, "pos", device), mat33s(a, device), vec3s(a, "size", device),
+                          vec3s(b, "pos", device), mat33s(b, device), vec3s(b, "size", device), margin, out])
     results = []
     for record in out.numpy():
         n = int(record["count"])
@@ -156,10 +160,10 @@ def collide(kind, pairs, margin=MARGIN):
     return results
 
 
-def assert_separates(kind, pairs, results, margin=MARGIN):
+def assert_separates(kind, pairs, results, margin=MARGIN, device="cpu"):
     """Moving A by (deepest depth) * normal leaves the pair just touching: max depth ~ 0."""
     again = [(moved(a, r["depth"].max() * r["normal"]), b) for (a, b), r in zip(pairs, results)]
-    for r, r2 in zip(results, collide(kind, again, margin)):
+    for r, r2 in zip(results, collide(kind, again, margin, device)):
         np.testing.assert_allclose(np.linalg.norm(r["normal"]), 1.0, atol=1e-6)
         assert r2["count"] >= 1
         np.testing.assert_allclose(r2["depth"].max(), 0.0, atol=2 * ATOL)
@@ -180,17 +184,17 @@ SPHERE_SPHERE_CASES = {
 
 
 @pytest.mark.parametrize("name", SPHERE_SPHERE_CASES)
-def test_sphere_sphere(name):
+def test_sphere_sphere(name, device):
     """Depth r_a + r_b - |d|, normal d / |d| (+y when coincident), point halfway between the
     two surface points; nothing beyond the margin."""
     a, b, count, normal, depth, point = SPHERE_SPHERE_CASES[name]
-    (r,) = collide("sphere_sphere", [(a, b)])
+    (r,) = collide("sphere_sphere", [(a, b)], device=device)
     assert r["count"] == count
     if count:
         np.testing.assert_allclose(r["normal"], normal, atol=ATOL)
         np.testing.assert_allclose(r["depth"], [depth], atol=ATOL)
         np.testing.assert_allclose(r["point"], [point], atol=ATOL)
-        assert_separates("sphere_sphere", [(a, b)], [r])
+        assert_separates("sphere_sphere", [(a, b)], [r], device=device)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -219,19 +223,19 @@ def sphere_box_pair(local, radius):
 
 
 @pytest.mark.parametrize("name", SPHERE_BOX_CASES)
-def test_sphere_box(name):
+def test_sphere_box(name, device):
     """Closest box point clamp(q, -h, h) outside; through the face of least slack inside.  The
     feature is the Voronoi region, and a centre inside keeps the id of the face it sank through."""
     local, radius, count, normal, depth, point, feature = SPHERE_BOX_CASES[name]
     pair = sphere_box_pair(local, radius)
-    (r,) = collide("sphere_box", [pair])
+    (r,) = collide("sphere_box", [pair], device=device)
     assert r["count"] == count
     if count:
         np.testing.assert_allclose(r["normal"], BOX_ROT @ np.asarray(normal), atol=ATOL)
         np.testing.assert_allclose(r["depth"], [depth], atol=ATOL)
         np.testing.assert_allclose(r["point"], [BOX_POS + BOX_ROT @ np.asarray(point)], atol=ATOL)
         assert r["feature"][0] == feature
-        assert_separates("sphere_box", [pair], [r])
+        assert_separates("sphere_box", [pair], [r], device=device)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -300,12 +304,12 @@ BOX_FACE_CASES = {
 
 
 @pytest.mark.parametrize("name", BOX_FACE_CASES)
-def test_box_box_face(name):
+def test_box_box_face(name, device):
     """Face-face contact: four points of equal depth, normal exactly +-y (the face axis is a
     column of an identity rotation, no arithmetic touches it), points on the overlap patch
     halfway between the faces, and distinct feature ids."""
     a, b, normal, depth = BOX_FACE_CASES[name]
-    (r,) = collide("box_box", [(a, b)])
+    (r,) = collide("box_box", [(a, b)], device=device)
     assert r["count"] == 4
     np.testing.assert_array_equal(r["normal"], normal)
     np.testing.assert_allclose(r["depth"], np.full(4, depth), atol=ATOL)
@@ -328,10 +332,10 @@ def test_box_box_face(name):
         assert area > 0.7 * 8 * 0.25 * math.tan(math.radians(22.5))
         assert all(feature_kinds(f) == ("edge", "edge") for f in r["feature"])
     if depth > 0:
-        assert_separates("box_box", [(a, b)], [r])
+        assert_separates("box_box", [(a, b)], [r], device=device)
 
 
-def test_box_box_near_aligned_stack_has_no_phantom_contacts():
+def test_box_box_near_aligned_stack_has_no_phantom_contacts(device):
     """Stacks of random boxes (half extents 0.1..2 m, footprints offset so that their edges
     cross), each box turned by up to 1e-6, 1e-5 or 1e-4 rad about a random axis and offset by
     1e-5 m; at the origin and at x = 1000 m.  Face and edge axes then tie to within rounding
@@ -352,7 +356,7 @@ def test_box_box_near_aligned_stack_has_no_phantom_contacts():
                               box(origin, half_b, rotation(rng.normal(size=3), angle))))
                 depths.append(depth)
                 bounds.append(2e-5 + 1e-5 + angle * (np.linalg.norm(half_a) + np.linalg.norm(half_b)))
-    for (a, b), r, depth, bound in zip(pairs, collide("box_box", pairs), depths, bounds):
+    for (a, b), r, depth, bound in zip(pairs, collide("box_box", pairs, device=device), depths, bounds):
         assert r["count"] == 4
         assert r["normal"] @ UP > math.cos(2.5e-4)
         assert np.all(np.abs(r["depth"] - depth) <= bound)
@@ -363,7 +367,7 @@ EDGE_CROSSING = (box((0, ROOT2 - 0.02, 0), CUBE, rotation((1, 0, 0), math.radian
                  box((0, 0, 0), CUBE, rotation((0, 0, 1), math.radians(45))))
 
 
-def test_box_box_edge_edge_crossing():
+def test_box_box_edge_edge_crossing(device):
     """B turned 45 deg about z has a ridge along z at y = 0.5 sqrt 2; A turned 45 deg about x has
     a ridge along x at its bottom.  Crossed with overlap 0.02: the axis is a_x x b_z = -y, one
     point halfway between the ridges, depth 0.02.  The same configuration under an arbitrary
@@ -373,7 +377,7 @@ def test_box_box_edge_edge_crossing():
     q = rotation((1, 2, 3), 0.7)
     shift = np.array([3.0, -1.0, 2.0])
     pairs = [(a, b), (transformed(a, q, shift), transformed(b, q, shift))]
-    results = collide("box_box", pairs)
+    results = collide("box_box", pairs, device=device)
     for r, motion in zip(results, (np.eye(3), q)):
         offset = shift if motion is q else 0.0
         assert r["count"] == 1
@@ -384,7 +388,7 @@ def test_box_box_edge_edge_crossing():
     assert results[0]["feature"][0] == results[1]["feature"][0]
     for (a, b), r in zip(pairs, results):
         assert_features_name_the_touching_features(a, b, r)
-    assert_separates("box_box", pairs, results)
+    assert_separates("box_box", pairs, results, device=device)
 
 
 def sat_depth(a, b):
@@ -403,7 +407,7 @@ def sat_depth(a, b):
 
 @pytest.mark.parametrize("half_a, half_b", [((0.3, 0.1, 0.3), (0.3, 0.1, 0.3)), (CUBE, (0.3, 0.05, 0.4)),
                                             ((0.6, 0.1, 0.2), CUBE)])
-def test_box_box_edge_axis_contacts_keep_the_faces_that_support_them(half_a, half_b):
+def test_box_box_edge_axis_contacts_keep_the_faces_that_support_them(half_a, half_b, device):
     """Random overlapping boxes (plates, cubes, bars; seeded orientations and offsets).  Where an
     edge axis wins, the faces of both boxes that support it are clipped against each other
     (edge_face_manifold): a plate lying tilted across another gets the strip it rests on, not a
@@ -419,7 +423,7 @@ def test_box_box_edge_axis_contacts_keep_the_faces_that_support_them(half_a, hal
         offset *= rng.uniform(0.2, 0.9) * (np.linalg.norm(half_a) + np.linalg.norm(half_b)) / 2 / np.linalg.norm(offset)
         pairs.append((box(offset, half_a, rotation(rng.normal(size=3), rng.uniform(0, math.pi))),
                       box((0, 0, 0), half_b, rotation(rng.normal(size=3), rng.uniform(0, math.pi)))))
-    results = collide("box_box", pairs)
+    results = collide("box_box", pairs, device=device)
     touching, edge_strips = [], 0
     size = sum(half_a) + sum(half_b)
     for (a, b), r in zip(pairs, results):
@@ -439,7 +443,7 @@ def test_box_box_edge_axis_contacts_keep_the_faces_that_support_them(half_a, hal
             edge_strips += r["count"] >= 2
         touching.append(((a, b), r))
     assert edge_strips >= 5
-    assert_separates("box_box", [t[0] for t in touching], [t[1] for t in touching])
+    assert_separates("box_box", [t[0] for t in touching], [t[1] for t in touching], device=device)
 
 
 CORNER_CASES = {
@@ -453,11 +457,11 @@ CORNER_CASES = {
 
 
 @pytest.mark.parametrize("name", CORNER_CASES)
-def test_box_box_corner(name):
+def test_box_box_corner(name, device):
     """A tilted box on a large one: the contacts are A's vertices below B's top face (plus
     margin), at depth = distance below it, points half that depth below it, normal +y."""
     a, b = CORNER_CASES[name]
-    (r,) = collide("box_box", [(a, b)])
+    (r,) = collide("box_box", [(a, b)], device=device)
     top = b["pos"][1] + b["size"][1]
     below = [v for v in vertices(a) if top - v[1] > -MARGIN]
     assert r["count"] == len(below) >= 1
@@ -469,19 +473,19 @@ def test_box_box_corner(name):
                                atol=ATOL)
     assert all(feature_kinds(f) == ("vertex", "face") for f in r["feature"])
     assert_features_name_the_touching_features(a, b, r)
-    assert_separates("box_box", [(a, b)], [r])
+    assert_separates("box_box", [(a, b)], [r], device=device)
 
 
-def test_box_box_gap_beyond_margin_and_separated_diagonally():
+def test_box_box_gap_beyond_margin_and_separated_diagonally(device):
     """Nothing when any axis separates the boxes by the margin or more."""
     pairs = [(box((0, 1.08, 0), CUBE), box((0, 0, 0), CUBE)),
              (box((1.2, 1.2, 0), CUBE, rotation((0, 0, 1), 0.3)), box((0, 0, 0), CUBE)),
              (box((0, ROOT2 + 0.06, 0), CUBE, rotation((1, 0, 0), math.radians(45))),
               box((0, 0, 0), CUBE, rotation((0, 0, 1), math.radians(45))))]
-    assert [r["count"] for r in collide("box_box", pairs)] == [0, 0, 0]
+    assert [r["count"] for r in collide("box_box", pairs, device=device)] == [0, 0, 0]
 
 
-def test_box_box_features_persist_under_small_motion():
+def test_box_box_features_persist_under_small_motion(device):
     """A solver matches impulses by feature: nudging a resting configuration by 1 mm and
     1 mrad must keep every id, with each point moving by about that much.  (Where more than four
     points are reduced to four, near-ties between equally good subsets may pick another subset
@@ -491,7 +495,7 @@ def test_box_box_features_persist_under_small_motion():
              CORNER_CASES["tilted_resting_on_corner"], EDGE_CROSSING]
     nudge = rotation((0.3, 1.0, -0.2), 1e-3)
     pairs = bases + [(box(a["pos"] + (1e-3, 0, -1e-3), a["size"], nudge @ a["rot"]), b) for a, b in bases]
-    results = collide("box_box", pairs)
+    results = collide("box_box", pairs, device=device)
     for before, after in zip(results[: len(bases)], results[len(bases):]):
         assert sorted(before["feature"].tolist()) == sorted(after["feature"].tolist())
         for f, p in zip(before["feature"], before["point"]):
@@ -503,14 +507,15 @@ def test_box_box_features_persist_under_small_motion():
 # The thesis method (SEED.md 4) against the separating-axis method
 
 
-def test_thesis_agrees_on_shallow_contacts():
+def test_thesis_agrees_on_shallow_contacts(device):
     """Shallow contacts, deeper than zero but within the threshold band: the thesis's
     vertex-face tests find the same points, depths, normal and feature ids as the clipped face
     (face-face, corner, tilted corner), and its edge-edge test the same as the edge axis."""
     pairs = [BOX_FACE_CASES["small_on_large"][:2], EDGE_CROSSING,
              (resting_on(CORNER_DOWN, CUBE, 0.5, 0.01, x=0.1, z=-0.2), box((0, 0, 0), CUBE)),
              (resting_on(TILTED, (0.4, 0.3, 0.2), 0.5, 0.002, x=0.3), box((0, 0, 0), (1, 0.5, 1)))]
-    for sat, thesis in zip(collide("box_box", pairs), collide("box_box_thesis", pairs)):
+    for sat, thesis in zip(collide("box_box", pairs, device=device),
+                           collide("box_box_thesis", pairs, device=device)):
         assert thesis["count"] == sat["count"]
         np.testing.assert_allclose(thesis["normal"], sat["normal"], atol=ATOL)
         np.testing.assert_allclose(np.sort(thesis["depth"]), np.sort(sat["depth"]), atol=ATOL)
@@ -519,15 +524,15 @@ def test_thesis_agrees_on_shallow_contacts():
         np.testing.assert_allclose(thesis["point"][by_position[0]], sat["point"][by_position[1]], atol=ATOL)
 
 
-def test_thesis_fails_on_deep_penetration():
+def test_thesis_fails_on_deep_penetration(device):
     """The thesis's known weakness, kept visible: a flat box sunk 0.1 m (twice the threshold)
     into a box of the same footprint.  The separating-axis method reports +y at depth 0.1;
     the thesis's top-face tests are out of their band, and what is left are vertices of each
     box lying exactly on the other's side planes, so it answers a side-face normal at depth 0:
     a solver fed this would push the boxes sideways and never lift A out."""
     pair = (box((0, 0.6, 0), (0.5, 0.2, 0.5)), box((0, 0, 0), CUBE))
-    (sat,) = collide("box_box", [pair])
-    (thesis,) = collide("box_box_thesis", [pair])
+    (sat,) = collide("box_box", [pair], device=device)
+    (thesis,) = collide("box_box_thesis", [pair], device=device)
     np.testing.assert_array_equal(sat["normal"], UP)
     np.testing.assert_allclose(sat["depth"], np.full(4, 0.1), atol=ATOL)
     assert thesis["count"] >= 1
@@ -547,16 +552,18 @@ def test_pair_table_orders_lower_shape_type_first():
     assert all(a <= b for a, b in PAIR_FUNCTIONS)
 
 
-def test_collide_pair_dispatches_and_flips_box_sphere():
+def test_collide_pair_dispatches_and_flips_box_sphere(device):
     """collide_pair equals the direct function for each ordered pair; (box, sphere) swaps the
     pair, so its normal is the flipped (sphere, box) normal and still points from B into A."""
     s, b = sphere_box_pair(SPHERE_BOX_CASES["edge"][0], SPHERE_BOX_CASES["edge"][1])
     cube_pair = CORNER_CASES["corner_into_face"]
     sphere_pair = SPHERE_SPHERE_CASES["penetrating"][:2]
     pairs = [(s, b), (b, s), cube_pair, sphere_pair]
-    via_pair = collide("pair", pairs)
-    direct = [collide("sphere_box", [(s, b)])[0], collide("sphere_box", [(s, b)])[0],
-              collide("box_box", [cube_pair])[0], collide("sphere_sphere", [sphere_pair])[0]]
+    via_pair = collide("pair", pairs, device=device)
+    direct = [collide("sphere_box", [(s, b)], device=device)[0],
+              collide("sphere_box", [(s, b)], device=device)[0],
+              collide("box_box", [cube_pair], device=device)[0],
+              collide("sphere_sphere", [sphere_pair], device=device)[0]]
     for i, (r, d) in enumerate(zip(via_pair, direct)):
         assert r["count"] == d["count"] == 1
         sign = -1.0 if i == 1 else 1.0
@@ -564,4 +571,4 @@ def test_collide_pair_dispatches_and_flips_box_sphere():
         np.testing.assert_array_equal(r["depth"], d["depth"])
         np.testing.assert_array_equal(r["point"], d["point"])
         np.testing.assert_array_equal(r["feature"], d["feature"])
-    assert_separates("pair", [(b, s)], [via_pair[1]])
+    assert_separates("pair", [(b, s)], [via_pair[1]], device=device)

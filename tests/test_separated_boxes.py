@@ -98,7 +98,8 @@ def sat_overlaps(a, b):
                                                   ((0.5, 0.5, 0.5), (0.3, 0.05, 0.4), 2),
                                                   ((0.6, 0.1, 0.2), (0.5, 0.5, 0.5), 3),
                                                   ((0.3, 0.02, 0.3), (0.2, 0.2, 0.2), 4)])
-def test_boxes_closer_than_the_margin_get_their_true_distance_as_the_nearest_gap(half_a, half_b, seed):
+def test_boxes_closer_than_the_margin_get_their_true_distance_as_the_nearest_gap(half_a, half_b, seed,
+                                                                                  device):
     """Plates, cubes, bars and a sheet at random poses, apart by 2 mm to 0.9 of the margin.  Each
     pair has a point: a face clip lying wholly beside its reference face gave none (0, 1 and 3 of
     these 150-pair families before the separated fallback; in a rain a plate falling past
@@ -112,7 +113,7 @@ def test_boxes_closer_than_the_margin_get_their_true_distance_as_the_nearest_gap
       apart, went 29 mm into it), so the nearest vertex or edge pair is added to them
       (box_box.with_nearest)."""
     pairs, gaps = separated_family(half_a, half_b, seed)
-    results = collide("box_box", pairs, MARGIN)
+    results = collide("box_box", pairs, MARGIN, device)
     for r, gap in zip(results, gaps):
         assert r["count"] >= 1, f"no point for boxes {gap:.4f} m apart"
         nearest = -r["depth"].max()

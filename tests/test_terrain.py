@@ -114,15 +114,15 @@ def test_explicit_tables_override_the_seeded_draw():
     assert t.phase_table()[1, 0] == pytest.approx(1.2)
 
 
-def sphere_sim(terrain, centers, radius):
+def sphere_sim(terrain, centers, radius, device="cpu"):
     b = ModelBuilder()
     b.set_terrain(terrain)
     for c in centers:
         b.add_sphere(radius, 1.0, position=tuple(c))
-    return Simulator(b.finalize(), SimConfig())
+    return Simulator(b.finalize(device), SimConfig(device=device))
 
 
-def test_sphere_query_finds_the_true_closest_point():
+def test_sphere_query_finds_the_true_closest_point(device):
     """Depth equals r minus the brute-force distance to the surface (grid search, 5 mm cells,
     so the oracle itself is within 5 mm / 2 * slope of the truth: 0.6 cm tolerance)."""
     terrain = FourierTerrain()
@@ -130,7 +130,7 @@ def test_sphere_query_finds_the_true_closest_point():
     radius = 0.5
     xz = rng.uniform(-10, 10, size=(60, 2))
     centers = np.stack([xz[:, 0], terrain.height(xz[:, 0], xz[:, 1]) + rng.uniform(-0.3, 0.6, 60), xz[:, 1]], 1)
-    sim = sphere_sim(terrain, centers, radius)
+    sim = sphere_sim(terrain, centers, radius, device)
     probe = sim._probe
     sim.collide(sim.state, probe, 1.0 / 240.0, 10.0)
     depth = probe.terrain_contact_depth.numpy()
@@ -142,14 +142,14 @@ def test_sphere_query_finds_the_true_closest_point():
         assert depth[i] == pytest.approx(radius - signed, abs=6e-3), f"sphere {i}"
 
 
-def test_sphere_on_30_degree_plane_gets_exact_normal_and_depth():
+def test_sphere_on_30_degree_plane_gets_exact_normal_and_depth(device):
     """Not a vertical test: on a slope the depth is measured along the plane normal."""
     plane = PlaneTerrain.from_slope(30.0)
     n = np.array(plane.normal)
     radius = 0.5
     center = np.array([2.0, 0.0, 1.0])
     center = center - (center @ n) * n + n * (radius - 0.01)  # 1 cm into the plane
-    sim = sphere_sim(plane, [center], radius)
+    sim = sphere_sim(plane, [center], radius, device)
     probe = sim._probe
     sim.collide(sim.state, probe, 1.0 / 240.0, 0.0)
     assert probe.terrain_contact_active.numpy()[0] == 1
@@ -182,7 +182,7 @@ def test_cubic_bound_bounds_every_third_directional_derivative(terrain):
 
 @pytest.mark.parametrize("moving", [True, False], ids=["moving", "at_rest"])
 @pytest.mark.parametrize("terrain", TERRAINS, ids=range(len(TERRAINS)))
-def test_box_checkpoint_cull_changes_no_contact(terrain, moving):
+def test_box_checkpoint_cull_changes_no_contact(terrain, moving, device):
     """Skipping checkpoints that provably cannot reach the surface (collide/terrain_contact.py)
     must give exactly the contacts of testing every checkpoint: boxes of random size and
     orientation, from 0.3 reach below the surface to 1.2 reach above it.  Moving and spinning
@@ -203,7 +203,7 @@ def test_box_checkpoint_cull_changes_no_contact(terrain, moving):
         b.add_box(tuple(half), 1.0, position=pos, orientation=tuple(quats[i]),
                   velocity=tuple(speed * rng.normal(0.0, 2.0, 3)),
                   angular_velocity=tuple(speed * rng.normal(0.0, 3.0, 3)))
-    sim = Simulator(b.finalize(), SimConfig(sleep=False))
+    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
     results = []
     for cull in (False, True):
         sim.terrain_cull = cull

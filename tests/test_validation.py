@@ -63,10 +63,10 @@ def test_scene_and_api_share_the_words():
     assert str(scene_error.value).replace("s.toml: [sim]", "SimConfig") == str(api_error.value)
 
 
-def test_step_count_is_checked():
+def test_step_count_is_checked(device):
     b = ModelBuilder()
     b.add_sphere(0.1)
-    sim = Simulator(b.finalize("cpu"), SimConfig(sleep=False))
+    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
     for bad, shown in ((-5, "-5"), (1.5, "1.5"), (True, "true")):
         with pytest.raises(ValueError, match=f"Simulator.step count must be an integer >= 0, got {shown}"):
             sim.step(bad)
