@@ -451,6 +451,8 @@ class Simulator:
                 self.pair_overflow.zero_()
                 self._run_steps(count)
                 demand = int(self.pair_overflow.numpy()[0])
+        if self.pairs is not None:
+            self.pairs.report_color_overflow()  # read once per call, like the pair overflow above
         if check:
             self.check_finite()
 

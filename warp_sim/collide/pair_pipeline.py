@@ -12,6 +12,7 @@ reads its two slab counts back and so is never captured.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +41,7 @@ class PairContactPipeline:
         self.body_reach = wp.zeros(n, dtype=float, device=device)
         self.domain_count = domain_count
         self.colors = colors or domain_count == 0
+        self.color_overflow_reported = False
         self.schedule = None
         if domain_count > 0:
             d = domain_count
@@ -130,6 +132,17 @@ class PairContactPipeline:
             return self.coloring.launch_bounds()
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
+
+    def report_color_overflow(self):
+        """Says once (a RuntimeWarning) when a colouring since the last call left pairs to the
+        overflow set, which the solver sweeps with split masses (solvers/pair_overflow.py)."""
+        if not self.colors or not self.coloring.take_overflow() or self.color_overflow_reported:
+            return
+        self.color_overflow_reported = True
+        warnings.warn(f"body-body pairs whose two bodies touch {COLOR_COUNT} or more others between them found "
+                      f"no colour of the colour schedule's {COLOR_COUNT}; they are swept together with split "
+                      "masses, which converges more slowly than a colour's sweep (solvers/pair_overflow.py)",
+                      RuntimeWarning, stacklevel=3)
 
     def domain_schedule(self):
         """What the solver needs to sweep by slab, or None when this pipeline only colours."""

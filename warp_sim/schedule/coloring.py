@@ -24,8 +24,9 @@ colours on every run, device and CPU thread count.  The pairs are then radix-sor
 entry at the colour boundaries: no counter is shared.
 
 A pair left uncoloured after ROUND_CAP rounds, or whose bodies already use all COLOR_COUNT
-colours between them, goes to the overflow set, the last bucket, walked in order by one thread
-(the last resort; ``overflow`` flags it on the device).  Measured on a 10x10x10 lattice of
+colours between them, goes to the overflow set, the last bucket, which the solver sweeps in
+parallel with split masses (solvers/pair_overflow.py; the last resort, and ``overflow`` flags it
+on the device, read once per Simulator.step call).  Measured on a 10x10x10 lattice of
 touching cubes (10,476 pairs, about 21 a body, the densest case the tests build): 44 rounds and
 33 colours, none left over (93 rounds with the maxima alone); the greedy sequential walk this
 replaced needed more than its 24 colours (5.6 % of the pairs went to its one-thread overflow).
@@ -274,7 +275,6 @@ class PairColoring:
         dev = self.device
         dim = self.capacity if live_count is None else min(live_count, self.capacity)
         self.pending.zero_()
-        self.overflow.zero_()
         self.body_best.fill_(-1)
         self.body_least.fill_(LEAST_EMPTY)
         self.body_color_mask.zero_()
@@ -302,8 +302,17 @@ class PairColoring:
         else:
             contacts.color_start.zero_()
 
+    def take_overflow(self) -> bool:
+        """Whether any pass since the last call left pairs to the overflow set (the flag is kept
+        across passes, so a captured step's passes are read once, after the replay)."""
+        hit = bool(self.overflow.numpy()[0])
+        if hit:
+            self.overflow.zero_()
+        return hit
+
     def launch_bounds(self) -> list[int]:
         """Per-colour launch sizes that hold whatever the colouring produced: a colour's pairs
-        share no dynamic body, so it has at most as many pairs as there are bodies."""
+        share no dynamic body, so it has at most as many pairs as there are bodies; the overflow
+        set may hold every pair (solvers/pair_overflow.py strides over it with fewer threads)."""
         bound = max(1, min(self.capacity, self.body_count))
-        return [bound] * COLOR_COUNT + [1]
+        return [bound] * COLOR_COUNT + [self.capacity]

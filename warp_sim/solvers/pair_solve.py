@@ -2,7 +2,8 @@
 
 See staged.py for the algebra.  A launch handles one colour; its pair range is read on the
 device from ``color_start`` (so the launch sequence can be captured in a CUDA graph).  The
-overflow colour's pairs may share bodies, so one thread walks them in order.
+overflow colour's pairs may share bodies: pair_overflow.py sweeps them with split masses (its
+impact and chain passes are walked in order by one thread).
 """
 
 import warp as wp
@@ -90,7 +91,7 @@ def normal_mass_inverse(n: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv
 
 
 @wp.func(inline=True)
-def solve_one_pair(
+def solve_pair_points(
     p: int,
     mode: int,
     # Model
@@ -101,31 +102,27 @@ def solve_one_pair(
     pairs: PairContacts,
     # Solver in/out
     solver: SolverBodies,
-    impact_sweep: int,
-    impact_since: int,
-):
-    if mode == MODE_IMPACT:
-        impact_pair(p, model, settings, pairs, solver, impact_sweep, impact_since)
-        return
+    vel_in: PairVelocity,
+    inv_mi: float,
+    inv_mj: float,
+    inv_ii: wp.mat33,
+    inv_ij: wp.mat33,
+) -> PairVelocity:
+    """Pair p's points swept once (``mode``: warm start, solve or relax) from the velocities
+    ``vel_in``, with the inverse masses given; returns the new velocities and writes only the
+    pair's own impulses (and a load mass, by maximum).  solve_one_pair gives it the bodies' own
+    masses and writes the result back; pair_overflow.py gives split masses to pairs that share
+    bodies within one launch and sums the results."""
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
-    n = pairs.pair_normal[p]
-    inv_mi = model.body_inv_mass[i]
-    inv_mj = model.body_inv_mass[j]
-    inv_ii = solver.solver_inv_inertia[i]
-    inv_ij = solver.solver_inv_inertia[j]
     xi = solver.solver_ref_pos[i]
     xj = solver.solver_ref_pos[j]
     drift_pi = solver.solver_drift_p[i]
     drift_pj = solver.solver_drift_p[j]
     drift_ri = solver.solver_drift_r[i]
     drift_rj = solver.solver_drift_r[j]
-    vel = PairVelocity()
-    vel.vi = solver.solver_v[i]
-    vel.wi = solver.solver_w[i]
-    vel.vj = solver.solver_v[j]
-    vel.wj = solver.solver_w[j]
+    vel = vel_in
     friction = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     count = pairs.pair_point_count[p]
     # rolling resistance of a sphere in the pair (terrain contacts: soft_step.solve_rolling); a
@@ -142,12 +139,16 @@ def solve_one_pair(
     reach_i = wp.length(model.body_size[i])
     reach_j = wp.length(model.body_size[j])
     # the heavier body's mass where the pair's masses differ by CHAIN_MASS_RATIO or more (with
-    # gravity, contact_rows.loaded_soft damps the contact for it; from about 12 on it changes it)
-    heavy_mass = wp.max(heavy_partner_mass(inv_mi, inv_mj), heavy_partner_mass(inv_mj, inv_mi))
+    # gravity, contact_rows.loaded_soft damps the contact for it; from about 12 on it changes it),
+    # from the bodies' own masses (a split pair, pair_overflow.py, solves with scaled ones)
+    own_inv_mi = model.body_inv_mass[i]
+    own_inv_mj = model.body_inv_mass[j]
+    heavy_mass = wp.max(heavy_partner_mass(own_inv_mi, own_inv_mj), heavy_partner_mass(own_inv_mj, own_inv_mi))
     if heavy_mass > 0.0 and mode == MODE_WARM_START:
-        # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain)
-        light_body = wp.where(inv_mi > inv_mj, i, j)
-        solver.solver_load_mass[light_body] = wp.max(solver.solver_load_mass[light_body], heavy_mass)
+        # the lighter body's terrain contacts carry the heavy one too (staged.sweep_body_terrain);
+        # a maximum, so split pairs sharing the light body may write it in any order
+        light_body = wp.where(own_inv_mi > own_inv_mj, i, j)
+        wp.atomic_max(solver.solver_load_mass, light_body, heavy_mass)
     for _pass in range(passes):
         before = vel
         normal_total = float(0.0)
@@ -230,6 +231,39 @@ def solve_one_pair(
         vel.wi = vel.wi + inv_ii * (new_roll - acc_roll)
         vel.wj = vel.wj - inv_ij * (new_roll - acc_roll)
 
+    return vel
+
+
+@wp.func(inline=True)
+def solve_one_pair(
+    p: int,
+    mode: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    impact_sweep: int,
+    impact_since: int,
+):
+    if mode == MODE_IMPACT:
+        impact_pair(p, model, settings, pairs, solver, impact_sweep, impact_since)
+        return
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    vel = PairVelocity()
+    vel.vi = solver.solver_v[i]
+    vel.wi = solver.solver_w[i]
+    vel.vj = solver.solver_v[j]
+    vel.wj = solver.solver_w[j]
+    vel = solve_pair_points(p, mode, model, settings, pairs, solver, vel, inv_mi, inv_mj,
+                            solver.solver_inv_inertia[i], solver.solver_inv_inertia[j])
     # Only dynamic bodies are written: a static body may sit in many pairs of one colour.
     if inv_mi > 0.0:
         solver.solver_v[i] = vel.vi

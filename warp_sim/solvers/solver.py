@@ -21,7 +21,8 @@ from ..schedule.coloring import COLOR_COUNT
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
-from .pair_solve import MODE_IMPACT, MODE_SOLVE, chain_pass, pair_pass
+from .pair_overflow import OverflowPairs
+from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -193,6 +194,13 @@ class SoftStepSolver:
             return MAKE_ROWS
         return MAKE_ROWS_ALWAYS
 
+    def _overflow_pairs(self, m) -> OverflowPairs:
+        """The overflow set's scratch, made by the first colour-scheduled step (the first step
+        of a captured simulation runs directly, so before any capture)."""
+        if getattr(self, "_overflow", None) is None:
+            self._overflow = OverflowPairs(m.body_count, self.device)
+        return self._overflow
+
     def _prepare(self, m, a, fresh_contacts: bool, make_rows: bool, from_impact: bool):
         launch(prepare_bodies, m.body_count, key=self, inputs=[
             a.model, a.settings, int(fresh_contacts), self._make_rows() if make_rows else MAKE_ROWS_NONE,
@@ -236,6 +244,8 @@ class SoftStepSolver:
         n = m.body_count
         dev = self.device
 
+        overflow = self._overflow_pairs(m)
+
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[a.model, a.settings, use_bias, a.slots, a.solver],
                    device=dev)
@@ -243,6 +253,18 @@ class SoftStepSolver:
         def pairs(mode: int, sweep: int = 0, since: int = -1):
             for color, size in enumerate(color_sizes):
                 if size == 0:
+                    continue
+                if color == COLOR_COUNT and mode != MODE_IMPACT:
+                    # pairs that share bodies, swept at once with split masses (pair_overflow.py)
+                    dim = overflow.threads(size)
+                    if mode == MODE_WARM_START:  # the substep's first pair stage: after any colouring
+                        overflow.count(dim, c, m.body_inv_mass)
+                    overflow.sweep(mode, dim, c, a.model, a.settings, a.pairs, a.solver, self.solver_v,
+                                   self.solver_w)
+                    if mode == MODE_SOLVE and m.has_mass_ratio:
+                        launch(chain_pass, 1, key=self, inputs=[
+                            color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
+                            a.solver], device=dev)
                     continue
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[

@@ -1,0 +1,195 @@
+"""The colour schedule's overflow set, solved in parallel by mass splitting.
+
+A pair finds no colour when its two bodies already use all COLOR_COUNT colours between them: a
+dynamic plank carrying 49 balls (tests/test_pair_overflow.py), a body at the bottom of a heap of
+small ones.  Such pairs may share bodies, so they cannot be swept one pair a thread like a colour;
+walking them in order on one thread would cost a GPU about a microsecond a pair.
+
+Instead every overflow pair is swept at once against the velocities the colours left, each with
+its bodies' masses split (Tonge, Benevolenski and Voroshilov 2012, "Mass splitting for jitter-free
+parallel rigid body simulation"): a body in s overflow pairs takes part in each with s times its
+inverse mass and inverse inertia, and its new velocity is the mean of what its s pairs computed,
+
+    v = v0 + (1/s) sum_p (v_p - v0),   v_p - v0 = s M^-1 P_p   =>   v = v0 + M^-1 sum_p P_p,
+
+so the velocity change is exactly the sum of the impulses the pairs stored: warm starts, the
+accumulated impulses and momentum stay consistent, as in a Gauss-Seidel sweep.  It is a Jacobi
+step on the split bodies, so it converges more slowly than a colour's sweep; the overflow set is a
+last resort, and Simulator.step says once when a scene reaches it.
+
+The sum is taken in 32.32 fixed point with integer atomics, whose result does not depend on the
+order the threads add in (float atomics would round differently run to run on a GPU), and applied
+by one owner pair per body (its lowest pair index).  The impact stage's pairs and the chain passes
+of heavy-on-light pairs (pair_solve.chain_pair) in the overflow set are still walked in order by one
+thread (their sweep stamps and time-of-impact shifts are per body, not per pair).
+
+A solve or relax stage runs OVERFLOW_ITERATIONS split sweeps (below says why).  Launches use
+OVERFLOW_THREADS threads striding over the set, so a captured step pays its small launches (a
+count a substep, two a split sweep) whether or not the set is empty.  On the CPU the two with
+atomics are plain launches (one thread): Warp's CPU atomics are not atomic across launch chunks
+(warp_sim/launch.py).
+"""
+
+import warp as wp
+
+from ..kernel_args import BodyModel, PairContacts
+from ..launch import launch
+from ..schedule.coloring import COLOR_COUNT
+from .pair_solve import MODE_WARM_START, PairVelocity, solve_pair_points
+from .solver_args import SolverBodies, StepSettings
+
+wp.set_module_options({"enable_backward": False})
+
+OVERFLOW_THREADS = 65536  # enough to fill a GPU for any overflow set; each strides over the set
+# Split sweeps per solve or relax stage (a warm start applies stored impulses, once).  One Jacobi
+# step leaves part of a push-out speed that a colour's Gauss-Seidel sweep would have taken back,
+# and a body split more ways needs more steps.  Balls striking a 5 kg plank without gravity
+# (tests/test_pair_overflow.py), largest kinetic energy gain in a step: 64 balls, 7.3e-4 with 1
+# sweep, 8.2e-5 with 2, 2.2e-8 with 4; 144 balls (the plank in 104 overflow pairs), 1.8e-6 with 4
+# and 2.3e-7 with 8, where the slab schedule's Gauss-Seidel gives 2.2e-8 (float rounding).
+OVERFLOW_ITERATIONS = 8
+FIXED_POINT = 4294967296.0  # 2^32: velocity changes summed as integers of 2^-32 m/s (or rad/s)
+NO_OWNER = 2147483647
+
+
+@wp.func
+def add_fixed(sums: wp.array(dtype=wp.int64), base: int, change: wp.vec3):
+    for k in range(3):
+        wp.atomic_add(sums, base + k, wp.int64(wp.round(change[k] * FIXED_POINT)))
+
+
+@wp.func
+def take_fixed(sums: wp.array(dtype=wp.int64), base: int) -> wp.vec3:
+    out = wp.vec3(0.0)
+    for k in range(3):
+        out[k] = float(wp.float64(sums[base + k]) * wp.float64(1.0 / FIXED_POINT))
+        sums[base + k] = wp.int64(0)
+    return out
+
+
+@wp.kernel
+def overflow_count(
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    body_inv_mass: wp.array(dtype=float),
+    # Contacts in
+    pair_body: wp.array(dtype=wp.vec2i),
+    # Solver out
+    solver_overflow_split: wp.array(dtype=wp.int32),
+    solver_overflow_owner: wp.array(dtype=wp.int32),
+):
+    """Per dynamic body: how many overflow pairs it is in, and the lowest of their indices."""
+    t = wp.tid()
+    for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
+        p = color_pairs_sorted[index]
+        ij = pair_body[p]
+        for side in range(2):
+            b = ij[side]
+            if body_inv_mass[b] > 0.0:
+                wp.atomic_add(solver_overflow_split, b, 1)
+                wp.atomic_min(solver_overflow_owner, b, p)
+
+
+@wp.kernel
+def overflow_pair_pass(
+    mode: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    solver_overflow_split: wp.array(dtype=wp.int32),
+    solver_overflow_velocity: wp.array(dtype=wp.int64),
+):
+    """Every overflow pair swept against the velocities before this launch, with split masses;
+    each body's share of the change summed in solver_overflow_velocity (v, then w, 6 a body)."""
+    t = wp.tid()
+    for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
+        p = color_pairs_sorted[index]
+        ij = pairs.pair_body[p]
+        i = ij[0]
+        j = ij[1]
+        split_i = float(wp.max(solver_overflow_split[i], 1))
+        split_j = float(wp.max(solver_overflow_split[j], 1))
+        vel = PairVelocity()
+        vel.vi = solver.solver_v[i]
+        vel.wi = solver.solver_w[i]
+        vel.vj = solver.solver_v[j]
+        vel.wj = solver.solver_w[j]
+        out = solve_pair_points(p, mode, model, settings, pairs, solver, vel,
+                                split_i * model.body_inv_mass[i], split_j * model.body_inv_mass[j],
+                                split_i * solver.solver_inv_inertia[i], split_j * solver.solver_inv_inertia[j])
+        if model.body_inv_mass[i] > 0.0:
+            add_fixed(solver_overflow_velocity, 6 * i, (out.vi - vel.vi) / split_i)
+            add_fixed(solver_overflow_velocity, 6 * i + 3, (out.wi - vel.wi) / split_i)
+        if model.body_inv_mass[j] > 0.0:
+            add_fixed(solver_overflow_velocity, 6 * j, (out.vj - vel.vj) / split_j)
+            add_fixed(solver_overflow_velocity, 6 * j + 3, (out.wj - vel.wj) / split_j)
+
+
+@wp.kernel
+def overflow_apply(
+    tid_offset: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Contacts in
+    pair_body: wp.array(dtype=wp.vec2i),
+    # Solver in/out
+    solver_overflow_owner: wp.array(dtype=wp.int32),
+    solver_overflow_velocity: wp.array(dtype=wp.int64),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+):
+    """Each body's summed change added by its owner pair alone (no two threads write a body)."""
+    t = wp.tid() + tid_offset
+    for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
+        p = color_pairs_sorted[index]
+        ij = pair_body[p]
+        for side in range(2):
+            b = ij[side]
+            if solver_overflow_owner[b] == p:
+                solver_v[b] = solver_v[b] + take_fixed(solver_overflow_velocity, 6 * b)
+                solver_w[b] = solver_w[b] + take_fixed(solver_overflow_velocity, 6 * b + 3)
+
+
+class OverflowPairs:
+    """The scratch and launches of the overflow set's split sweeps (module docstring)."""
+
+    def __init__(self, body_count: int, device):
+        n = max(body_count, 1)
+        self.device = device
+        self.solver_overflow_split = wp.zeros(n, dtype=wp.int32, device=device)
+        self.solver_overflow_owner = wp.full(n, NO_OWNER, dtype=wp.int32, device=device)
+        self.solver_overflow_velocity = wp.zeros(6 * n, dtype=wp.int64, device=device)
+
+    @staticmethod
+    def threads(bucket_size: int) -> int:
+        """Threads for a launch over the set: its size when read on the host (direct stepping),
+        OVERFLOW_THREADS when it is a bound (capturable launches)."""
+        return max(1, min(bucket_size, OVERFLOW_THREADS))
+
+    def count(self, dim: int, contacts, body_inv_mass):
+        """Split counts and owners of the current overflow set (after each colouring)."""
+        self.solver_overflow_split.zero_()
+        self.solver_overflow_owner.fill_(NO_OWNER)
+        wp.launch(overflow_count, dim=dim, device=self.device, inputs=[
+            contacts.color_start, contacts.color_pairs_sorted, body_inv_mass, contacts.pair_body,
+            self.solver_overflow_split, self.solver_overflow_owner])
+
+    def sweep(self, mode: int, dim: int, contacts, model_args, settings_args, pairs_args, solver_args, solver_v,
+              solver_w):
+        """One pair stage over the set: the split sweep, then each body's summed change."""
+        for _ in range(1 if mode == MODE_WARM_START else OVERFLOW_ITERATIONS):
+            wp.launch(overflow_pair_pass, dim=dim, device=self.device, inputs=[
+                mode, contacts.color_start, contacts.color_pairs_sorted, model_args, settings_args, pairs_args,
+                solver_args, self.solver_overflow_split, self.solver_overflow_velocity])
+            # no atomics: through warp_sim.launch, so race_check sees that no two threads write a body
+            launch(overflow_apply, dim, key=self, device=self.device, inputs=[
+                contacts.color_start, contacts.color_pairs_sorted, contacts.pair_body, self.solver_overflow_owner,
+                self.solver_overflow_velocity, solver_v, solver_w])
