@@ -60,6 +60,17 @@ def momenta(sim):
     return p, L
 
 
+def momenta_and_scales(sim):
+    """momenta(sim), and the momentum and angular momentum flowing through the scene (sums of
+    magnitudes), the scales float32 rounding errors are relative to."""
+    mass = 1.0 / sim.model.host["body_inv_mass"]
+    vel = sim.state.body_vel.numpy().astype(np.float64)
+    pos = sim.state.body_pos.numpy().astype(np.float64)
+    scale_p = float((mass * np.linalg.norm(vel, axis=1)).sum())
+    scale_L = float((mass * np.linalg.norm(np.cross(pos, vel), axis=1)).sum()) + scale_p
+    return (*momenta(sim), scale_p, scale_L)
+
+
 def kinetic_energy(sim) -> float:
     mass = 1.0 / sim.model.host["body_inv_mass"]
     vel = sim.state.body_vel.numpy().astype(np.float64)
@@ -107,12 +118,7 @@ def test_overflow_pairs_keep_momentum_and_never_gain_energy(seed, side, plank_ma
     body gets); a contact without restitution can only take kinetic energy away (1e-6 of it allows
     the float32 rounding of the velocities it is summed from, 2^-24 each)."""
     sim = plank(side, plank_mass, device, gravity=False, seed=seed, friction=friction, gap=0.002)
-    p0, L0 = momenta(sim)
-    mass = 1.0 / sim.model.host["body_inv_mass"]
-    vel = sim.state.body_vel.numpy().astype(np.float64)
-    pos = sim.state.body_pos.numpy().astype(np.float64)
-    scale_p = float((mass * np.linalg.norm(vel, axis=1)).sum())
-    scale_L = float((mass * np.linalg.norm(np.cross(pos, vel), axis=1)).sum()) + scale_p
+    p0, L0, scale_p, scale_L = momenta_and_scales(sim)
     energy = energy0 = kinetic_energy(sim)
     reached = 0
     for _ in range(20):
@@ -165,12 +171,7 @@ def test_a_body_split_many_ways_keeps_momentum_but_converges_slowly(device):
     from warp_sim.solvers.pair_overflow import OVERFLOW_ITERATIONS
 
     sim = plank(12, 5.0, device, gravity=False, seed=1, friction=0.5, gap=0.002)
-    p0, L0 = momenta(sim)
-    mass = 1.0 / sim.model.host["body_inv_mass"]
-    vel = sim.state.body_vel.numpy().astype(np.float64)
-    pos = sim.state.body_pos.numpy().astype(np.float64)
-    scale_p = float((mass * np.linalg.norm(vel, axis=1)).sum())
-    scale_L = float((mass * np.linalg.norm(np.cross(pos, vel), axis=1)).sum()) + scale_p
+    p0, L0, scale_p, scale_L = momenta_and_scales(sim)
     energy = kinetic_energy(sim)
     rise = 0.0
     for k in range(5):
