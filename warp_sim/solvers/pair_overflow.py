@@ -24,8 +24,9 @@ of heavy-on-light pairs (pair_solve.chain_pair) in the overflow set are still wa
 thread (their sweep stamps and time-of-impact shifts are per body, not per pair).
 
 A solve or relax stage runs OVERFLOW_ITERATIONS split sweeps (below says why).  Launches use
-OVERFLOW_THREADS threads striding over the set, so a captured step pays its small launches (a
-count a substep, two a split sweep) whether or not the set is empty.  On the CPU the two with
+OVERFLOW_THREADS threads striding over the set.  A captured step holds them behind conditional
+nodes (``wp.capture_if`` on a flag written each substep), so a step with no pair in the set pays
+one one-thread launch a substep for it.  On the CPU the two with
 atomics are plain launches (one thread): Warp's CPU atomics are not atomic across launch chunks
 (warp_sim/launch.py).
 """
@@ -65,6 +66,11 @@ def take_fixed(sums: wp.array(dtype=wp.int64), base: int) -> wp.vec3:
         out[k] = float(wp.float64(sums[base + k]) * wp.float64(1.0 / FIXED_POINT))
         sums[base + k] = wp.int64(0)
     return out
+
+
+@wp.kernel
+def overflow_present(color_start: wp.array(dtype=wp.int32), present: wp.array(dtype=wp.int32)):
+    present[0] = wp.where(color_start[COLOR_COUNT + 1] > color_start[COLOR_COUNT], 1, 0)
 
 
 @wp.kernel
@@ -167,6 +173,7 @@ class OverflowPairs:
         self.solver_overflow_split = wp.zeros(n, dtype=wp.int32, device=device)
         self.solver_overflow_owner = wp.full(n, NO_OWNER, dtype=wp.int32, device=device)
         self.solver_overflow_velocity = wp.zeros(6 * n, dtype=wp.int64, device=device)
+        self.present = wp.zeros(1, dtype=wp.int32, device=device)  # 1 while the set holds a pair
 
     @staticmethod
     def threads(bucket_size: int) -> int:
@@ -174,17 +181,33 @@ class OverflowPairs:
         OVERFLOW_THREADS when it is a bound (capturable launches)."""
         return max(1, min(bucket_size, OVERFLOW_THREADS))
 
-    def count(self, dim: int, contacts, body_inv_mass):
-        """Split counts and owners of the current overflow set (after each colouring)."""
-        self.solver_overflow_split.zero_()
-        self.solver_overflow_owner.fill_(NO_OWNER)
-        wp.launch(overflow_count, dim=dim, device=self.device, inputs=[
-            contacts.color_start, contacts.color_pairs_sorted, body_inv_mass, contacts.pair_body,
-            self.solver_overflow_split, self.solver_overflow_owner])
+    def stage(self, mode: int, dim: int, contacts, body_inv_mass, model_args, settings_args, pairs_args,
+              solver_args, solver_v, solver_w):
+        """One pair stage over the set.  The substep's first (the warm start) also finds whether
+        the set holds any pair and, if so, its split counts and owners; every stage then runs only
+        if it does (``wp.capture_if``: a conditional node in a captured graph, so a step whose
+        colours hold every pair skips the set's launches at replay, read on the host otherwise)."""
+        args = dict(mode=mode, dim=dim, contacts=contacts, body_inv_mass=body_inv_mass, model_args=model_args,
+                    settings_args=settings_args, pairs_args=pairs_args, solver_args=solver_args, solver_v=solver_v,
+                    solver_w=solver_w)
+        if self.device.is_cuda and not self.device.is_capturing:
+            # stepped without a graph: reading the flag back would stall; on an empty set the
+            # launches return at once
+            self._stage(**args)
+            return
+        if mode == MODE_WARM_START:
+            wp.launch(overflow_present, dim=1, device=self.device, inputs=[contacts.color_start, self.present])
+        wp.capture_if(self.present, on_true=self._stage, **args)
 
-    def sweep(self, mode: int, dim: int, contacts, model_args, settings_args, pairs_args, solver_args, solver_v,
-              solver_w):
-        """One pair stage over the set: the split sweep, then each body's summed change."""
+    def _stage(self, mode, dim, contacts, body_inv_mass, model_args, settings_args, pairs_args, solver_args, solver_v,
+               solver_w):
+        if mode == MODE_WARM_START:
+            # split counts and owners of this substep's set (colourings happen between substeps)
+            self.solver_overflow_split.zero_()
+            self.solver_overflow_owner.fill_(NO_OWNER)
+            wp.launch(overflow_count, dim=dim, device=self.device, inputs=[
+                contacts.color_start, contacts.color_pairs_sorted, body_inv_mass, contacts.pair_body,
+                self.solver_overflow_split, self.solver_overflow_owner])
         for _ in range(1 if mode == MODE_WARM_START else OVERFLOW_ITERATIONS):
             wp.launch(overflow_pair_pass, dim=dim, device=self.device, inputs=[
                 mode, contacts.color_start, contacts.color_pairs_sorted, model_args, settings_args, pairs_args,

@@ -22,7 +22,7 @@ from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
 from .pair_overflow import OverflowPairs
-from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
+from .pair_solve import MODE_IMPACT, MODE_SOLVE, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -256,11 +256,8 @@ class SoftStepSolver:
                     continue
                 if color == COLOR_COUNT and mode != MODE_IMPACT:
                     # pairs that share bodies, swept at once with split masses (pair_overflow.py)
-                    dim = overflow.threads(size)
-                    if mode == MODE_WARM_START:  # the substep's first pair stage: after any colouring
-                        overflow.count(dim, c, m.body_inv_mass)
-                    overflow.sweep(mode, dim, c, a.model, a.settings, a.pairs, a.solver, self.solver_v,
-                                   self.solver_w)
+                    overflow.stage(mode, overflow.threads(size), c, m.body_inv_mass, a.model, a.settings, a.pairs,
+                                   a.solver, self.solver_v, self.solver_w)
                     if mode == MODE_SOLVE and m.has_mass_ratio:
                         launch(chain_pass, 1, key=self, inputs=[
                             color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
