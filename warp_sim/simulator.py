@@ -110,6 +110,7 @@ class SimConfig:
     recollide_outrun: bool = True  # "step" updates: find the pairs again mid-step if a body outruns its reach
     turn_refresh: float = 0.005  # [m] "step" updates: a pair whose bodies turned this far since the pass is found again; 0: never
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
+    overflow_pairs: str = "auto"  # pairs past the colours: "split" (CUDA), "in_order" (CPU); solvers/pair_overflow.py
     allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
     graph: bool | None = None  # capture the whole step as one graph and replay it; None: on CUDA only
 
@@ -135,6 +136,7 @@ class SimConfig:
             restitution_threshold=self.restitution_threshold,
             convergence_tolerance=self.convergence_tolerance,
             solver=self.solver,
+            overflow_pairs=self.overflow_pairs,
         )
 
 

@@ -27,6 +27,7 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 SOLVERS = ("soft_step", "pushout")
 CONTACT_UPDATES = ("step", "substep")
 PAIR_SCHEDULES = ("auto", "domains", "colors")
+OVERFLOW_PAIRS = ("auto", "split", "in_order")
 
 
 class ValidationError(ValueError):
@@ -386,6 +387,7 @@ SIM_SCHEMA = {
     "recollide_outrun": Boolean(),
     "turn_refresh": Number(ge=0),
     "pair_schedule": Choice(PAIR_SCHEDULES),
+    "overflow_pairs": Choice(OVERFLOW_PAIRS),
     "allow_initial_overlap": Boolean(),
     "graph": Boolean(),
 }

@@ -135,13 +135,14 @@ class PairContactPipeline:
 
     def report_color_overflow(self):
         """Says once (a RuntimeWarning) when a colouring since the last call left pairs to the
-        overflow set, which the solver sweeps with split masses (solvers/pair_overflow.py)."""
+        overflow set (solvers/pair_overflow.py)."""
         if not self.colors or not self.coloring.take_overflow() or self.color_overflow_reported:
             return
         self.color_overflow_reported = True
         warnings.warn(f"body-body pairs whose two bodies touch {COLOR_COUNT} or more others between them found "
-                      f"no colour of the colour schedule's {COLOR_COUNT}; they are swept together with split "
-                      "masses, which converges more slowly than a colour's sweep (solvers/pair_overflow.py)",
+                      f"no colour of the colour schedule's {COLOR_COUNT}; they are solved after the colours, walked "
+                      "in order by one thread or swept with split masses, which converges more slowly "
+                      "(SimConfig.overflow_pairs, solvers/pair_overflow.py)",
                       RuntimeWarning, stacklevel=3)
 
     def domain_schedule(self):

@@ -52,6 +52,7 @@ class SolverSettings:
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
     solver: str = "soft_step"
+    overflow_pairs: str = "auto"  # "auto": "split" on CUDA, "in_order" on the CPU (pair_overflow.py)
 
 
 class _LaunchSite:
@@ -194,6 +195,12 @@ class SoftStepSolver:
             return MAKE_ROWS
         return MAKE_ROWS_ALWAYS
 
+    def _split_overflow(self) -> bool:
+        """Whether the pairs past the colours are swept with split masses (pair_overflow.py says
+        when each way pays) or walked in order by one thread."""
+        choice = self.settings.overflow_pairs
+        return choice == "split" or (choice == "auto" and self.device.is_cuda)
+
     def _overflow_pairs(self, m) -> OverflowPairs:
         """The overflow set's scratch, made by the first colour-scheduled step (the first step
         of a captured simulation runs directly, so before any capture)."""
@@ -244,7 +251,7 @@ class SoftStepSolver:
         n = m.body_count
         dev = self.device
 
-        overflow = self._overflow_pairs(m)
+        overflow = self._overflow_pairs(m) if self._split_overflow() else None
 
         def terrain(use_bias: int):
             launch(terrain_sweep, n, key=self, inputs=[a.model, a.settings, use_bias, a.slots, a.solver],
@@ -254,7 +261,7 @@ class SoftStepSolver:
             for color, size in enumerate(color_sizes):
                 if size == 0:
                     continue
-                if color == COLOR_COUNT and mode != MODE_IMPACT:
+                if color == COLOR_COUNT and mode != MODE_IMPACT and self._split_overflow():
                     # pairs that share bodies, swept at once with split masses (pair_overflow.py)
                     overflow.stage(mode, overflow.threads(size), c, m.body_inv_mass, a.model, a.settings, a.pairs,
                                    a.solver, self.solver_v, self.solver_w)
