@@ -23,7 +23,7 @@ on the CPU).  On a GPU a walk by one thread costs about a microsecond a pair in 
 the CPU both run on one thread, and the walk is one Gauss-Seidel pass against eight Jacobi ones:
 a plank under 64 balls, colour schedule, 34.8 steps/s in order against 27.5 split; under 400
 balls 22.6 against 17.1, the deepest ball 2.4 mm into the plank against 4.3 mm (a resting
-column's budget is 7.5 mm).  So the CPU walks them, and its tests ask for "split" to prove the
+column's budget is 7.5 mm; one run each, back to back).  So the CPU walks them, and its tests ask for "split" to prove the
 GPU's way.
 
 The sum is taken in 32.32 fixed point with integer atomics, whose result does not depend on the
