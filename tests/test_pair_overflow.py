@@ -73,6 +73,17 @@ def momenta_and_scales(sim):
     return (*momenta(sim), scale_p, scale_L)
 
 
+def check_laws(sim, p0, L0, scale_p, scale_L, energy: float) -> float:
+    """Momentum and angular momentum kept to 1e-5 of their scales, kinetic energy not above
+    ``energy`` (1e-6 of it for rounding; the test docstrings say why); returns the energy now."""
+    p, L = momenta(sim)
+    assert np.abs(p - p0).max() < 1e-5 * scale_p
+    assert np.abs(L - L0).max() < 1e-5 * scale_L
+    now = kinetic_energy(sim)
+    assert now <= energy * (1 + 1e-6)
+    return now
+
+
 def kinetic_energy(sim) -> float:
     mass = 1.0 / sim.model.host["body_inv_mass"]
     vel = sim.state.body_vel.numpy().astype(np.float64)
@@ -126,12 +137,7 @@ def test_overflow_pairs_keep_momentum_and_never_gain_energy(seed, side, plank_ma
     for _ in range(20):
         sim.step()
         reached = max(reached, overflow_size(sim))
-        p, L = momenta(sim)
-        assert np.abs(p - p0).max() < 1e-5 * scale_p
-        assert np.abs(L - L0).max() < 1e-5 * scale_L
-        now = kinetic_energy(sim)
-        assert now <= energy * (1 + 1e-6)
-        energy = now
+        energy = check_laws(sim, p0, L0, scale_p, scale_L, energy)
     assert reached > 0
     assert energy < 0.9 * energy0  # the strikes did take energy out (e = 0)
 
@@ -207,10 +213,5 @@ def test_the_cpu_walks_the_overflow_set_in_order(choice):
         reference.step()
         assert overflow_size(walked) > 0 or _ > 0
         np.testing.assert_array_equal(walked.state.body_vel.numpy(), reference.state.body_vel.numpy())
-        p, L = momenta(walked)
-        assert np.abs(p - p0).max() < 1e-5 * scale_p
-        assert np.abs(L - L0).max() < 1e-5 * scale_L
-        now = kinetic_energy(walked)
-        assert now <= energy * (1 + 1e-6)
-        energy = now
+        energy = check_laws(walked, p0, L0, scale_p, scale_L, energy)
     assert getattr(walked.solver, "_overflow", None) is None  # no split scratch made
