@@ -332,8 +332,24 @@ def impact_terrain_body(
     solver.solver_impact_stamp[i] = impact_sweep
 
 
+@wp.struct
+class PairImpact:
+    """A pair's impact: both bodies' new velocities (without the gravity of t*), each one's
+    time-of-impact shift from this pair, whether the pair struck (``hit``) and whether both bodies
+    move (``early``: the impact is kept at the substep's start, see impact_pair_velocity)."""
+
+    vi: wp.vec3
+    wi: wp.vec3
+    vj: wp.vec3
+    wj: wp.vec3
+    shift_i: wp.vec3
+    shift_j: wp.vec3
+    hit: int
+    early: int
+
+
 @wp.func(inline=True)
-def impact_pair(
+def impact_pair_velocity(
     p: int,
     # Model
     model: BodyModel,
@@ -341,27 +357,26 @@ def impact_pair(
     settings: StepSettings,
     # Contacts in
     pairs: PairContacts,
-    # Solver in/out
+    # Solver in
     solver: SolverBodies,
-    impact_sweep: int,
-    impact_since: int,
-):
-    """The impact of pair p (its manifold's points, at the current pose: pair_geometry.py; the
-    algebra of pair_solve.py, impulse +P on i)."""
+    vi: wp.vec3,
+    wi: wp.vec3,
+    vj: wp.vec3,
+    wj: wp.vec3,
+    inv_mi: float,
+    inv_mj: float,
+    inv_ii: wp.mat33,
+    inv_ij: wp.mat33,
+) -> PairImpact:
+    """The impact of pair p from the velocities given, with the inverse masses given (the
+    bodies' own, or split ones: pair_overflow.py); writes nothing."""
+    out = PairImpact()
+    out.hit = 0
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
     e = wp.max(model.body_restitution[i], model.body_restitution[j])
     count = pairs.pair_point_count[p]
-    if count == 0:
-        return
-    stamps = solver.solver_impact_stamp
-    if unchanged_since(stamps[i], impact_since) and unchanged_since(stamps[j], impact_since):
-        return
-    inv_mi = model.body_inv_mass[i]
-    inv_mj = model.body_inv_mass[j]
-    if inv_mi == 0.0 and inv_mj == 0.0:
-        return
     xi = solver.solver_ref_pos[i]
     xj = solver.solver_ref_pos[j]
     dpi = solver.solver_drift_p[i]
@@ -370,12 +385,6 @@ def impact_pair(
     drj = solver.solver_drift_r[j]
     radius_i = model.body_sphere_radius[i]
     radius_j = model.body_sphere_radius[j]
-    inv_ii = solver.solver_inv_inertia[i]
-    inv_ij = solver.solver_inv_inertia[j]
-    vi = solver.solver_v[i]
-    wi = solver.solver_w[i]
-    vj = solver.solver_v[j]
-    wj = solver.solver_w[j]
     # the points' geometry at the current pose, found once: rows k of normal, arm_i, arm_j
     normal = wp.mat44(0.0)
     arm_i = wp.mat44(0.0)
@@ -385,8 +394,10 @@ def impact_pair(
     bounces = int(0)
     toi = settings.h
     for k in range(count):
+        # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                             xi, xj, dpi, dpj, dri, drj, radius_i, radius_j, inv_mi, inv_mj)
+                             xi, xj, dpi, dpj, dri, drj, radius_i, radius_j, model.body_inv_mass[i],
+                             model.body_inv_mass[j])
         for axis in range(3):
             normal[k, axis] = now.normal[axis]
             arm_i[k, axis] = now.arm_i[axis]
@@ -400,7 +411,7 @@ def impact_pair(
             if vn < -settings.restitution_threshold:
                 bounces = 1
     if hit == 0:
-        return
+        return out
     if bounces == 0:
         e = 0.0
     early = inv_mi > 0.0 and inv_mj > 0.0
@@ -469,19 +480,61 @@ def impact_pair(
                     wi = wi + inv_ii * wp.cross(ri, change)
                     vj = vj - inv_mj * change
                     wj = wj - inv_ij * wp.cross(rj, change)
+    out.hit = 1
+    out.early = int(early)
+    out.vi = vi - gi
+    out.wi = wi
+    out.vj = vj - gj
+    out.wj = wj
+    out.shift_i = toi * (vi_in - vi)
+    out.shift_j = toi * (vj_in - vj)
+    return out
+
+
+@wp.func(inline=True)
+def impact_pair(
+    p: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    impact_sweep: int,
+    impact_since: int,
+):
+    """The impact of pair p (its manifold's points, at the current pose: pair_geometry.py; the
+    algebra of pair_solve.py, impulse +P on i)."""
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    if pairs.pair_point_count[p] == 0:
+        return
+    stamps = solver.solver_impact_stamp
+    if unchanged_since(stamps[i], impact_since) and unchanged_since(stamps[j], impact_since):
+        return
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    if inv_mi == 0.0 and inv_mj == 0.0:
+        return
+    out = impact_pair_velocity(p, model, settings, pairs, solver, solver.solver_v[i], solver.solver_w[i],
+                               solver.solver_v[j], solver.solver_w[j], inv_mi, inv_mj, solver.solver_inv_inertia[i],
+                               solver.solver_inv_inertia[j])
+    if out.hit == 0:
+        return
     # only dynamic bodies are written: a static body may sit in many pairs of one colour
     if inv_mi > 0.0:
         solver.solver_impact_stamp[i] = impact_sweep
-        solver.solver_v[i] = vi - gi
-        solver.solver_w[i] = wi
-        solver.solver_toi_shift[i] = wp.where(early, wp.vec3(0.0),
-                                              solver.solver_toi_shift[i] + toi * (vi_in - vi))
+        solver.solver_v[i] = out.vi
+        solver.solver_w[i] = out.wi
+        solver.solver_toi_shift[i] = wp.where(out.early != 0, wp.vec3(0.0), solver.solver_toi_shift[i] + out.shift_i)
     if inv_mj > 0.0:
         solver.solver_impact_stamp[j] = impact_sweep
-        solver.solver_v[j] = vj - gj
-        solver.solver_w[j] = wj
-        solver.solver_toi_shift[j] = wp.where(early, wp.vec3(0.0),
-                                              solver.solver_toi_shift[j] + toi * (vj_in - vj))
+        solver.solver_v[j] = out.vj
+        solver.solver_w[j] = out.wj
+        solver.solver_toi_shift[j] = wp.where(out.early != 0, wp.vec3(0.0), solver.solver_toi_shift[j] + out.shift_j)
 
 
 @wp.kernel

@@ -28,9 +28,12 @@ GPU's way.
 
 The sum is taken in 32.32 fixed point with integer atomics, whose result does not depend on the
 order the threads add in (float atomics would round differently run to run on a GPU), and applied
-by one owner pair per body (its lowest pair index).  The impact stage's pairs and the chain passes
-of heavy-on-light pairs (pair_solve.chain_pair) in the overflow set are still walked in order by one
-thread (their sweep stamps and time-of-impact shifts are per body, not per pair).
+by one owner pair per body (its lowest pair index).  The impact stage (impact.py) is split the
+same way, one split sweep per impact sweep: each pair's time-of-impact shift is summed like its
+velocity change, the owner stamps the body with the sweep, and a body struck by a pair of two
+moving bodies keeps its impact early, as impact_pair has it.  Only the chain passes of
+heavy-on-light pairs (pair_solve.chain_pair) in the overflow set are still walked in order by one
+thread (they walk the lighter body's terrain contacts too).
 
 A solve or relax stage runs OVERFLOW_ITERATIONS split sweeps (below says why).  Launches use
 OVERFLOW_THREADS threads striding over the set.  A captured step holds them behind conditional
@@ -45,7 +48,8 @@ import warp as wp
 from ..kernel_args import BodyModel, PairContacts
 from ..launch import launch
 from ..schedule.coloring import COLOR_COUNT
-from .pair_solve import MODE_WARM_START, PairVelocity, solve_pair_points
+from .impact import impact_pair_velocity, unchanged_since
+from .pair_solve import MODE_IMPACT, MODE_WARM_START, PairVelocity, solve_pair_points
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -173,6 +177,99 @@ def overflow_apply(
                 solver_w[b] = solver_w[b] + take_fixed(solver_overflow_velocity, 6 * b + 3)
 
 
+@wp.kernel
+def overflow_impact_pass(
+    impact_sweep: int,
+    impact_since: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    solver_overflow_split: wp.array(dtype=wp.int32),
+    solver_overflow_velocity: wp.array(dtype=wp.int64),
+    solver_overflow_shift: wp.array(dtype=wp.int64),
+    solver_overflow_hit: wp.array(dtype=wp.int32),
+):
+    """One impact sweep of every overflow pair (impact.impact_pair's, with split masses): velocity
+    changes and time-of-impact shifts summed per body, and per body 1 if a pair struck it, 2 if
+    one of those kept its impact early (impact.impact_pair_velocity).  Stamps are read as the
+    sweep before left them and written by overflow_impact_apply."""
+    t = wp.tid()
+    for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
+        p = color_pairs_sorted[index]
+        ij = pairs.pair_body[p]
+        i = ij[0]
+        j = ij[1]
+        inv_mi = model.body_inv_mass[i]
+        inv_mj = model.body_inv_mass[j]
+        stamps = solver.solver_impact_stamp
+        skip = unchanged_since(stamps[i], impact_since) and unchanged_since(stamps[j], impact_since)
+        if pairs.pair_point_count[p] == 0 or skip or (inv_mi == 0.0 and inv_mj == 0.0):
+            continue
+        split_i = float(wp.max(solver_overflow_split[i], 1))
+        split_j = float(wp.max(solver_overflow_split[j], 1))
+        vi = solver.solver_v[i]
+        wi = solver.solver_w[i]
+        vj = solver.solver_v[j]
+        wj = solver.solver_w[j]
+        out = impact_pair_velocity(p, model, settings, pairs, solver, vi, wi, vj, wj, split_i * inv_mi,
+                                   split_j * inv_mj, split_i * solver.solver_inv_inertia[i],
+                                   split_j * solver.solver_inv_inertia[j])
+        if out.hit == 0:
+            continue
+        if inv_mi > 0.0:
+            add_fixed(solver_overflow_velocity, 6 * i, (out.vi - vi) / split_i)
+            add_fixed(solver_overflow_velocity, 6 * i + 3, (out.wi - wi) / split_i)
+            add_fixed(solver_overflow_shift, 3 * i, out.shift_i / split_i)
+            wp.atomic_max(solver_overflow_hit, i, 1 + out.early)
+        if inv_mj > 0.0:
+            add_fixed(solver_overflow_velocity, 6 * j, (out.vj - vj) / split_j)
+            add_fixed(solver_overflow_velocity, 6 * j + 3, (out.wj - wj) / split_j)
+            add_fixed(solver_overflow_shift, 3 * j, out.shift_j / split_j)
+            wp.atomic_max(solver_overflow_hit, j, 1 + out.early)
+
+
+@wp.kernel
+def overflow_impact_apply(
+    tid_offset: int,
+    impact_sweep: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Contacts in
+    pair_body: wp.array(dtype=wp.vec2i),
+    # Solver in/out
+    solver_overflow_owner: wp.array(dtype=wp.int32),
+    solver_overflow_velocity: wp.array(dtype=wp.int64),
+    solver_overflow_shift: wp.array(dtype=wp.int64),
+    solver_overflow_hit: wp.array(dtype=wp.int32),
+    solver_v: wp.array(dtype=wp.vec3),
+    solver_w: wp.array(dtype=wp.vec3),
+    solver_toi_shift: wp.array(dtype=wp.vec3),
+    solver_impact_stamp: wp.array(dtype=wp.int32),
+):
+    """Each struck body's summed impact applied by its owner pair, as impact_pair writes one: the
+    sweep's stamp, and the shift added to the body's, or in place of it after an early impact."""
+    t = wp.tid() + tid_offset
+    for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
+        p = color_pairs_sorted[index]
+        ij = pair_body[p]
+        for side in range(2):
+            b = ij[side]
+            if solver_overflow_owner[b] == p and solver_overflow_hit[b] != 0:
+                solver_v[b] = solver_v[b] + take_fixed(solver_overflow_velocity, 6 * b)
+                solver_w[b] = solver_w[b] + take_fixed(solver_overflow_velocity, 6 * b + 3)
+                shift = take_fixed(solver_overflow_shift, 3 * b)
+                solver_toi_shift[b] = wp.where(solver_overflow_hit[b] == 2, shift, solver_toi_shift[b] + shift)
+                solver_impact_stamp[b] = impact_sweep
+                solver_overflow_hit[b] = 0
+
+
 class OverflowPairs:
     """The scratch and launches of the overflow set's split sweeps (module docstring)."""
 
@@ -182,6 +279,8 @@ class OverflowPairs:
         self.solver_overflow_split = wp.zeros(n, dtype=wp.int32, device=device)
         self.solver_overflow_owner = wp.full(n, NO_OWNER, dtype=wp.int32, device=device)
         self.solver_overflow_velocity = wp.zeros(6 * n, dtype=wp.int64, device=device)
+        self.solver_overflow_shift = wp.zeros(3 * n, dtype=wp.int64, device=device)  # impacts' time-of-impact shifts
+        self.solver_overflow_hit = wp.zeros(n, dtype=wp.int32, device=device)
         self.present = wp.zeros(1, dtype=wp.int32, device=device)  # 1 while the set holds a pair
 
     @staticmethod
@@ -190,33 +289,46 @@ class OverflowPairs:
         OVERFLOW_THREADS when it is a bound (capturable launches)."""
         return max(1, min(bucket_size, OVERFLOW_THREADS))
 
-    def stage(self, mode: int, dim: int, contacts, body_inv_mass, model_args, settings_args, pairs_args,
-              solver_args, solver_v, solver_w):
-        """One pair stage over the set.  The substep's first (the warm start) also finds whether
-        the set holds any pair and, if so, its split counts and owners; every stage then runs only
-        if it does (``wp.capture_if``: a conditional node in a captured graph, so a step whose
-        colours hold every pair skips the set's launches at replay, read on the host otherwise)."""
-        args = dict(mode=mode, dim=dim, contacts=contacts, body_inv_mass=body_inv_mass, model_args=model_args,
-                    settings_args=settings_args, pairs_args=pairs_args, solver_args=solver_args, solver_v=solver_v,
-                    solver_w=solver_w)
+    def stage(self, mode: int, dim: int, recount: bool, contacts, body_inv_mass, model_args, settings_args,
+              pairs_args, solver_args, solver_v, solver_w, impact_sweep: int = 0, impact_since: int = -1):
+        """One pair stage over the set.  ``recount`` (the substep's first pair stage after a
+        colouring: its first impact sweep, its warm start) finds whether the set holds any pair and,
+        if so, its split counts and owners; every stage then runs only if it does
+        (``wp.capture_if``: a conditional node in a captured graph, so a step whose colours hold
+        every pair skips the set's launches at replay; read on the host otherwise)."""
+        args = dict(mode=mode, dim=dim, recount=recount, contacts=contacts, body_inv_mass=body_inv_mass,
+                    model_args=model_args, settings_args=settings_args, pairs_args=pairs_args,
+                    solver_args=solver_args, solver_v=solver_v, solver_w=solver_w, impact_sweep=impact_sweep,
+                    impact_since=impact_since)
         if self.device.is_cuda and not self.device.is_capturing:
             # stepped without a graph: reading the flag back would stall; on an empty set the
             # launches return at once
             self._stage(**args)
             return
-        if mode == MODE_WARM_START:
+        if recount:
             wp.launch(overflow_present, dim=1, device=self.device, inputs=[contacts.color_start, self.present])
         wp.capture_if(self.present, on_true=self._stage, **args)
 
-    def _stage(self, mode, dim, contacts, body_inv_mass, model_args, settings_args, pairs_args, solver_args, solver_v,
-               solver_w):
-        if mode == MODE_WARM_START:
-            # split counts and owners of this substep's set (colourings happen between substeps)
+    def _stage(self, mode, dim, recount, contacts, body_inv_mass, model_args, settings_args, pairs_args, solver_args,
+               solver_v, solver_w, impact_sweep, impact_since):
+        if recount:
             self.solver_overflow_split.zero_()
             self.solver_overflow_owner.fill_(NO_OWNER)
             wp.launch(overflow_count, dim=dim, device=self.device, inputs=[
                 contacts.color_start, contacts.color_pairs_sorted, body_inv_mass, contacts.pair_body,
                 self.solver_overflow_split, self.solver_overflow_owner])
+        if mode == MODE_IMPACT:
+            # one split sweep per impact sweep, as the colours get (the stage repeats its sweeps)
+            wp.launch(overflow_impact_pass, dim=dim, device=self.device, inputs=[
+                impact_sweep, impact_since, contacts.color_start, contacts.color_pairs_sorted, model_args,
+                settings_args, pairs_args, solver_args, self.solver_overflow_split, self.solver_overflow_velocity,
+                self.solver_overflow_shift, self.solver_overflow_hit])
+            launch(overflow_impact_apply, dim, key=self, device=self.device, inputs=[
+                impact_sweep, contacts.color_start, contacts.color_pairs_sorted, contacts.pair_body,
+                self.solver_overflow_owner, self.solver_overflow_velocity, self.solver_overflow_shift,
+                self.solver_overflow_hit, solver_v, solver_w, solver_args.solver_toi_shift,
+                solver_args.solver_impact_stamp])
+            return
         for _ in range(1 if mode == MODE_WARM_START else OVERFLOW_ITERATIONS):
             wp.launch(overflow_pair_pass, dim=dim, device=self.device, inputs=[
                 mode, contacts.color_start, contacts.color_pairs_sorted, model_args, settings_args, pairs_args,

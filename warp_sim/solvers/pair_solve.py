@@ -2,8 +2,8 @@
 
 See staged.py for the algebra.  A launch handles one colour; its pair range is read on the
 device from ``color_start`` (so the launch sequence can be captured in a CUDA graph).  The
-overflow colour's pairs may share bodies: pair_overflow.py sweeps them with split masses (its
-impact and chain passes are walked in order by one thread).
+overflow colour's pairs may share bodies: on CUDA pair_overflow.py sweeps them with split masses
+(their chain passes are walked in order by one thread), on the CPU one thread walks them.
 """
 
 import warp as wp
@@ -155,8 +155,9 @@ def solve_pair_points(
         for k in range(count):
             slot = p * POINTS + k
             # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
+            # (where the point sits follows the bodies' own masses, split or not)
             now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], xi, xj,
-                                 drift_pi, drift_pj, drift_ri, drift_rj, radius_i, radius_j, inv_mi, inv_mj)
+                                 drift_pi, drift_pj, drift_ri, drift_rj, radius_i, radius_j, own_inv_mi, own_inv_mj)
             n = now.normal
             ri = now.arm_i
             rj = now.arm_j

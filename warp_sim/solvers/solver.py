@@ -22,7 +22,7 @@ from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, terrain_impact
 from .pair_overflow import OverflowPairs
-from .pair_solve import MODE_IMPACT, MODE_SOLVE, chain_pass, pair_pass
+from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -261,10 +261,12 @@ class SoftStepSolver:
             for color, size in enumerate(color_sizes):
                 if size == 0:
                     continue
-                if color == COLOR_COUNT and mode != MODE_IMPACT and self._split_overflow():
+                if color == COLOR_COUNT and self._split_overflow():
                     # pairs that share bodies, swept at once with split masses (pair_overflow.py)
-                    overflow.stage(mode, overflow.threads(size), c, m.body_inv_mass, a.model, a.settings, a.pairs,
-                                   a.solver, self.solver_v, self.solver_w)
+                    # recount at the substep's first pair stage after a colouring (impacts come first)
+                    recount = mode == MODE_WARM_START or (mode == MODE_IMPACT and sweep == 0)
+                    overflow.stage(mode, overflow.threads(size), recount, c, m.body_inv_mass, a.model, a.settings,
+                                   a.pairs, a.solver, self.solver_v, self.solver_w, sweep, since)
                     if mode == MODE_SOLVE and m.has_mass_ratio:
                         launch(chain_pass, 1, key=self, inputs=[
                             color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
