@@ -73,6 +73,13 @@ def add_fixed(sums: wp.array(dtype=wp.int64), base: int, change: wp.vec3):
 
 
 @wp.func
+def add_split_change(sums: wp.array(dtype=wp.int64), b: int, dv: wp.vec3, dw: wp.vec3, split: float):
+    """Body b's share of one split pair's velocity change: the change over its split count."""
+    add_fixed(sums, 6 * b, dv / split)
+    add_fixed(sums, 6 * b + 3, dw / split)
+
+
+@wp.func
 def take_fixed(sums: wp.array(dtype=wp.int64), base: int) -> wp.vec3:
     out = wp.vec3(0.0)
     for k in range(3):
@@ -145,11 +152,9 @@ def overflow_pair_pass(
                                 split_i * model.body_inv_mass[i], split_j * model.body_inv_mass[j],
                                 split_i * solver.solver_inv_inertia[i], split_j * solver.solver_inv_inertia[j])
         if model.body_inv_mass[i] > 0.0:
-            add_fixed(solver_overflow_velocity, 6 * i, (out.vi - vel.vi) / split_i)
-            add_fixed(solver_overflow_velocity, 6 * i + 3, (out.wi - vel.wi) / split_i)
+            add_split_change(solver_overflow_velocity, i, out.vi - vel.vi, out.wi - vel.wi, split_i)
         if model.body_inv_mass[j] > 0.0:
-            add_fixed(solver_overflow_velocity, 6 * j, (out.vj - vel.vj) / split_j)
-            add_fixed(solver_overflow_velocity, 6 * j + 3, (out.wj - vel.wj) / split_j)
+            add_split_change(solver_overflow_velocity, j, out.vj - vel.vj, out.wj - vel.wj, split_j)
 
 
 @wp.kernel
@@ -224,13 +229,11 @@ def overflow_impact_pass(
         if out.hit == 0:
             continue
         if inv_mi > 0.0:
-            add_fixed(solver_overflow_velocity, 6 * i, (out.vi - vi) / split_i)
-            add_fixed(solver_overflow_velocity, 6 * i + 3, (out.wi - wi) / split_i)
+            add_split_change(solver_overflow_velocity, i, out.vi - vi, out.wi - wi, split_i)
             add_fixed(solver_overflow_shift, 3 * i, out.shift_i / split_i)
             wp.atomic_max(solver_overflow_hit, i, 1 + out.early)
         if inv_mj > 0.0:
-            add_fixed(solver_overflow_velocity, 6 * j, (out.vj - vj) / split_j)
-            add_fixed(solver_overflow_velocity, 6 * j + 3, (out.wj - wj) / split_j)
+            add_split_change(solver_overflow_velocity, j, out.vj - vj, out.wj - wj, split_j)
             add_fixed(solver_overflow_shift, 3 * j, out.shift_j / split_j)
             wp.atomic_max(solver_overflow_hit, j, 1 + out.early)
 
