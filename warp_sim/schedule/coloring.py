@@ -24,9 +24,9 @@ colours on every run, device and CPU thread count.  The pairs are then radix-sor
 entry at the colour boundaries: no counter is shared.
 
 A pair left uncoloured after ROUND_CAP rounds, or whose bodies already use all COLOR_COUNT
-colours between them, goes to the overflow set, the last bucket, which the solver sweeps in
-parallel with split masses (solvers/pair_overflow.py; the last resort, and ``overflow`` flags it
-on the device, read once per Simulator.step call).  Measured on a 10x10x10 lattice of
+colours between them, goes to the overflow set, the last bucket: the last resort, which the
+solver sweeps with split masses on CUDA and walks in order on the CPU (solvers/pair_overflow.py).
+``overflow`` flags it on the device; Simulator.step reads the flag once per call, after its steps.  Measured on a 10x10x10 lattice of
 touching cubes (10,476 pairs, about 21 a body, the densest case the tests build): 44 rounds and
 33 colours, none left over (93 rounds with the maxima alone); the greedy sequential walk this
 replaced needed more than its 24 colours (5.6 % of the pairs went to its one-thread overflow).
@@ -305,6 +305,7 @@ class PairColoring:
     def take_overflow(self) -> bool:
         """Whether any pass since the last call left pairs to the overflow set (the flag is kept
         across passes, so a captured step's passes are read once, after the replay)."""
+        # one int read back per Simulator.step call, after the steps (never inside one)
         hit = bool(self.overflow.numpy()[0])
         if hit:
             self.overflow.zero_()

@@ -38,9 +38,9 @@ thread (they walk the lighter body's terrain contacts too).
 A solve or relax stage runs OVERFLOW_ITERATIONS split sweeps (below says why).  Launches use
 OVERFLOW_THREADS threads striding over the set.  A captured step holds them behind conditional
 nodes (``wp.capture_if`` on a flag written each substep), so a step with no pair in the set pays
-one one-thread launch a substep for it.  On the CPU the two with
-atomics are plain launches (one thread): Warp's CPU atomics are not atomic across launch chunks
-(warp_sim/launch.py).
+one one-thread launch a substep for it, which reads two colour starts.  On the CPU the kernels
+with atomics (the count and the two split sweeps) are plain launches, one thread: Warp's CPU
+atomics are not atomic across launch chunks (warp_sim/launch.py).
 """
 
 import warp as wp
@@ -49,7 +49,7 @@ from ..kernel_args import BodyModel, PairContacts
 from ..launch import launch
 from ..schedule.coloring import COLOR_COUNT
 from .impact import impact_pair_velocity, unchanged_since
-from .pair_solve import MODE_IMPACT, MODE_WARM_START, PairVelocity, solve_pair_points
+from .pair_solve import MODE_IMPACT, MODE_WARM_START, read_pair_velocity, solve_pair_points
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -73,6 +73,12 @@ def add_fixed(sums: wp.array(dtype=wp.int64), base: int, change: wp.vec3):
 
 
 @wp.func
+def split_count(solver_overflow_split: wp.array(dtype=wp.int32), b: int) -> float:
+    """How many ways body b is split (1 for a static body, which no pair counts)."""
+    return float(wp.max(solver_overflow_split[b], 1))
+
+
+@wp.func
 def add_split_change(sums: wp.array(dtype=wp.int64), b: int, dv: wp.vec3, dw: wp.vec3, split: float):
     """Body b's share of one split pair's velocity change: the change over its split count."""
     add_fixed(sums, 6 * b, dv / split)
@@ -90,6 +96,7 @@ def take_fixed(sums: wp.array(dtype=wp.int64), base: int) -> wp.vec3:
 
 @wp.kernel
 def overflow_present(color_start: wp.array(dtype=wp.int32), present: wp.array(dtype=wp.int32)):
+    # one thread, two loads: the flag the stage's conditional node reads (O(1) whatever the scene)
     present[0] = wp.where(color_start[COLOR_COUNT + 1] > color_start[COLOR_COUNT], 1, 0)
 
 
@@ -141,13 +148,9 @@ def overflow_pair_pass(
         ij = pairs.pair_body[p]
         i = ij[0]
         j = ij[1]
-        split_i = float(wp.max(solver_overflow_split[i], 1))
-        split_j = float(wp.max(solver_overflow_split[j], 1))
-        vel = PairVelocity()
-        vel.vi = solver.solver_v[i]
-        vel.wi = solver.solver_w[i]
-        vel.vj = solver.solver_v[j]
-        vel.wj = solver.solver_w[j]
+        split_i = split_count(solver_overflow_split, i)
+        split_j = split_count(solver_overflow_split, j)
+        vel = read_pair_velocity(solver, i, j)
         out = solve_pair_points(p, mode, model, settings, pairs, solver, vel,
                                 split_i * model.body_inv_mass[i], split_j * model.body_inv_mass[j],
                                 split_i * solver.solver_inv_inertia[i], split_j * solver.solver_inv_inertia[j])
@@ -217,8 +220,8 @@ def overflow_impact_pass(
         skip = unchanged_since(stamps[i], impact_since) and unchanged_since(stamps[j], impact_since)
         if pairs.pair_point_count[p] == 0 or skip or (inv_mi == 0.0 and inv_mj == 0.0):
             continue
-        split_i = float(wp.max(solver_overflow_split[i], 1))
-        split_j = float(wp.max(solver_overflow_split[j], 1))
+        split_i = split_count(solver_overflow_split, i)
+        split_j = split_count(solver_overflow_split, j)
         vi = solver.solver_v[i]
         wi = solver.solver_w[i]
         vj = solver.solver_v[j]

@@ -59,6 +59,16 @@ class PairVelocity:
 
 
 @wp.func
+def read_pair_velocity(solver: SolverBodies, i: int, j: int) -> PairVelocity:
+    vel = PairVelocity()
+    vel.vi = solver.solver_v[i]
+    vel.wi = solver.solver_w[i]
+    vel.vj = solver.solver_v[j]
+    vel.wj = solver.solver_w[j]
+    return vel
+
+
+@wp.func
 def apply_pair_impulse(vel: PairVelocity, impulse: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv_mj: float,
                        inv_ii: wp.mat33, inv_ij: wp.mat33) -> PairVelocity:
     out = vel
@@ -258,12 +268,7 @@ def solve_one_pair(
     j = ij[1]
     inv_mi = model.body_inv_mass[i]
     inv_mj = model.body_inv_mass[j]
-    vel = PairVelocity()
-    vel.vi = solver.solver_v[i]
-    vel.wi = solver.solver_w[i]
-    vel.vj = solver.solver_v[j]
-    vel.wj = solver.solver_w[j]
-    vel = solve_pair_points(p, mode, model, settings, pairs, solver, vel, inv_mi, inv_mj,
+    vel = solve_pair_points(p, mode, model, settings, pairs, solver, read_pair_velocity(solver, i, j), inv_mi, inv_mj,
                             solver.solver_inv_inertia[i], solver.solver_inv_inertia[j])
     # Only dynamic bodies are written: a static body may sit in many pairs of one colour.
     if inv_mi > 0.0:
