@@ -5,12 +5,21 @@ a point of effective mass m_eff sags W / (m_eff omega^2), omega = 2 pi f.  The s
 with iterations, it is what the spring is.  Down a column every contact carries all the weight
 above it, so the column's top sinks by the sum
 
-    sag = sum over the column's contacts  g W_above / (m_pair omega^2)
+    sag = sum over the column's contacts  g W_above / (M_contact omega^2)
 
-with m_pair the pair's reduced mass m_a m_b / (m_a + m_b) (the body's own mass on the ground or on
-a static body): a face of four points has the same translational stiffness as one point of the
-reduced mass when the bodies are cubes, and a sphere's single point is exactly that.  40 unit
-cubes: (40 + 2 (1 + ... + 39)) g / omega^2 = 1600 g / omega^2 = 110 mm at 60 Hz, as measured.
+with M_contact the sum of the effective masses of the contact's points, each pushing back as a
+spring of stiffness m_eff omega^2 (``contact_masses``): m_eff = 1 / k_n, k_n = sum over the two
+bodies of 1/m + (r x n) . I^-1 (r x n), r the point's arm.  A sphere touches at one point under
+its centre (r x n = 0), so M_contact is the pair's reduced mass m_a m_b / (m_a + m_b) (the body's
+own mass on the ground or on a static body).  A box resting on a face touches at the face's four
+corners, and for cubes that gives the reduced mass too (each corner's k_n is 4 / m against the
+ground), but not for other boxes: a corner's arm turns a flat box more easily, so a plate of
+0.6 x 0.2 x 0.6 m has M_contact = 0.625 m on the ground and 0.3125 m on another plate, and its
+column sags 1.6 times as far as its masses alone say (measured: 25 such plates sank 11.0 mm under
+a plan that took them for cubes and expected 7.5).  A tall box's arms are short, so it sags less.
+On curved terrain a box's face also has points between its corners (builder.py), which only makes
+the contact stiffer than estimated.  40 unit cubes: (40 + 2 (1 + ... + 39)) g / omega^2 =
+1600 g / omega^2 = 110 mm at 60 Hz, as measured.
 
 The stiffness cannot simply be raised: above a quarter of the substep rate the sweeps'
 Gauss-Seidel no longer settles a column within its 2 + 1 sweeps and it starts to jitter (measured:
@@ -96,6 +105,7 @@ class SubstepPlan:
     landing_speed: float = 0.0  # [m/s] the fastest landing on a pile the scene starts with
     landing_depth: float = 0.01  # SimConfig.landing_depth [m]
     landing_dt: float = 0.0  # the step dt the landing was planned for [s]
+    raised_by: str = ""  # "sag" or "landing": the budget the last substep added was for
 
     def landing_transient(self, substeps: int | None = None) -> float:
         """The deepest transient of the fastest landing at ``substeps`` (default: the ones run) [m]."""
@@ -105,7 +115,7 @@ class SubstepPlan:
         """Why auto_substeps runs more than requested, in a few words ("" when it does not)."""
         if self.substeps == self.requested:
             return ""
-        if self.sag_requested > self.budget:
+        if self.raised_by == "sag":
             return f"a column would sag {self.sag_requested * 1000:.0f} mm"
         return f"a landing on a pile would sink {self.landing_transient(self.requested) * 1000:.0f} mm"
 
@@ -131,11 +141,68 @@ class SubstepPlan:
         return text
 
 
-def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarray, radius: np.ndarray):
-    """The column of the largest sag: (sum of its g-free sag terms W_above / m_pair, its bodies),
-    and the longest fall onto a pile (the gaps summed up a column of LANDING_PILE bodies or more,
-    ``radius`` the volume-equivalent radii).  Only the series is computed here; multiply by
-    g / omega^2 for metres."""
+def resting_faces(shape: np.ndarray, size: np.ndarray, rot: np.ndarray, inv_inertia: np.ndarray,
+                  inv_mass: np.ndarray, up: np.ndarray):
+    """What ``contact_masses`` needs of each body's face that looks most nearly down: (c1, c2,
+    inv_inertia_world, area, ground), where the face's corners are the arms r = +-d1 +- d2 (d1, d2
+    its half-extent vectors) and c_i = d_i x n, n = up, so r x n = +-c1 +- c2; the world inverse
+    inertia R diag(I^-1) R^T; the face's area; M_contact on the ground.  A sphere's single point
+    lies under its centre: c1 = c2 = 0, area 0, M_contact its mass."""
+    n = len(shape)
+    alignment = np.abs(np.einsum("nij,i->nj", rot, up))  # |body axis . up|
+    normal_axis = np.argmax(alignment, axis=1)
+    first = (normal_axis + 1) % 3
+    second = (normal_axis + 2) % 3
+    rows = np.arange(n)
+    sphere = (shape == SHAPE_SPHERE)[:, None]
+    c1 = np.where(sphere, 0.0, np.cross(rot[rows, :, first] * size[rows, first][:, None], up))
+    c2 = np.where(sphere, 0.0, np.cross(rot[rows, :, second] * size[rows, second][:, None], up))
+    inv_inertia_world = (rot * inv_inertia[:, None, :]) @ np.transpose(rot, (0, 2, 1))
+    area = np.where(sphere[:, 0], 0.0, 4.0 * size[rows, first] * size[rows, second])
+    diagonal = quadratic(inv_inertia_world, c1, c1) + quadratic(inv_inertia_world, c2, c2)
+    ground = np.where(area == 0.0, 1.0 / inv_mass,
+                      corner_masses(inv_mass, diagonal, quadratic(inv_inertia_world, c1, c2)))
+    return c1, c2, inv_inertia_world, area, ground
+
+
+def quadratic(matrix: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x . M y for stacks of 3-vectors and 3 x 3 matrices."""
+    return np.einsum("ni,nij,nj->n", x, matrix, y)
+
+
+def corner_masses(k0: np.ndarray, diagonal: np.ndarray, cross_term: np.ndarray) -> np.ndarray:
+    """Sum of 1 / k_n over a face's four corners r x n = +-c1 +- c2, where k_n = k0 + diagonal
+    +- 2 cross_term (diagonal the c1 and c2 terms of (r x n) . I^-1 (r x n), cross_term c1 . I^-1 c2)."""
+    return 2.0 / (k0 + diagonal + 2.0 * cross_term) + 2.0 / (k0 + diagonal - 2.0 * cross_term)
+
+
+def contact_masses(faces, inv_mass: np.ndarray, below: np.ndarray, on_ground: np.ndarray) -> np.ndarray:
+    """M_contact (module docstring) of each body's lower contact: on the ground (``on_ground``),
+    or on the body ``below`` it in its column.  Two boxes touch over the smaller of their faces,
+    taken as centred on both (a column is one body wide); a sphere on either side makes it one
+    point under the centres.  Two unit cubes: 4 corners of k_n = 8 / m, the reduced mass m / 2."""
+    c1, c2, inertia, area, ground = faces
+    single = area == 0.0
+    # a pair: the smaller face's corners, as arms of both bodies
+    own = (area <= area[below])[:, None]
+    s1 = np.where(own, c1, c1[below])
+    s2 = np.where(own, c2, c2[below])
+    k0 = inv_mass + inv_mass[below]
+    lower = inertia[below]
+    # (I_a^-1 + I_b^-1) applied to the shared face's c1 and c2: both bodies turn about the same arms
+    m1 = np.einsum("nij,nj->ni", inertia, s1) + np.einsum("nij,nj->ni", lower, s1)
+    m2 = np.einsum("nij,nj->ni", inertia, s2) + np.einsum("nij,nj->ni", lower, s2)
+    diagonal = np.sum(s1 * m1, axis=1) + np.sum(s2 * m2, axis=1)
+    cross_term = np.sum(s1 * m2, axis=1)
+    pair = np.where(single | single[below], 1.0 / k0, corner_masses(k0, diagonal, cross_term))
+    return np.where(on_ground, ground, pair)
+
+
+def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarray, radius: np.ndarray, faces):
+    """The column of the largest sag: (sum of its g-free sag terms W_above / M_contact, its
+    bodies), and the longest fall onto a pile (the gaps summed up a column of LANDING_PILE bodies
+    or more, ``radius`` the volume-equivalent radii).  Only the series is computed here; multiply
+    by g / omega^2 for metres.  ``faces``: ``resting_faces`` of the bodies."""
     a = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
     e1 = np.cross(up, a)
     e1 /= np.linalg.norm(e1)
@@ -158,8 +225,9 @@ def column_weights(pos: np.ndarray, mass: np.ndarray, width: float, up: np.ndarr
         prefix = np.cumsum(m)
         prefix_before = np.where(first > 0, prefix[np.maximum(first - 1, 0)], 0.0)
         above = np.repeat(total, counts) - (prefix - prefix_before) + m  # weight on the body's lower contact
-        below = np.r_[m[:1], m[:-1]]  # the body under each (the first's is replaced below)
-        pair = np.where(np.arange(len(m)) == first, m, m * below / (m + below))  # the bottom rests on the ground
+        on_ground = np.arange(len(m)) == first  # a column's bottom body rests on the ground
+        below = np.maximum(np.arange(len(m)) - 1, 0)  # the body under each, in column order
+        pair = contact_masses(tuple(f[order] for f in faces), 1.0 / m, below, on_ground)
         terms = np.add.reduceat(above / pair, starts)
         terms = np.where(counts >= 2, terms, 0.0)
         k = int(np.argmax(terms))
@@ -196,8 +264,9 @@ def volume_radius(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
     return np.where(shape == SHAPE_SPHERE, size[:, 0], box)
 
 
-def plan_substeps(model, config, pos: np.ndarray | None = None) -> SubstepPlan:
-    """The substeps to run for ``config`` on ``model`` (positions ``pos``, default the model's)."""
+def plan_substeps(model, config, pos: np.ndarray | None = None, rot: np.ndarray | None = None) -> SubstepPlan:
+    """The substeps to run for ``config`` on ``model`` (positions ``pos`` and rotation matrices
+    ``rot``, default the model's)."""
     requested = int(config.substeps)
     g = float(np.linalg.norm(config.gravity))
     host = model.host
@@ -210,16 +279,25 @@ def plan_substeps(model, config, pos: np.ndarray | None = None) -> SubstepPlan:
         # a column one body wide: the median body's volume-equivalent diameter
         width = 2.0 * float(np.median(host["body_bound_radius"][dynamic])) / math.sqrt(3.0)
         radius = volume_radius(host["body_shape"][dynamic], np.asarray(host["body_size"], dtype=np.float64)[dynamic])
-        terms, count, fall = column_weights(p, mass, max(width, 1e-6), up, radius)
+        size = np.asarray(host["body_size"], dtype=np.float64)[dynamic]
+        rotation = np.asarray(host["body_rot"] if rot is None else rot, dtype=np.float64)[dynamic]
+        inv_inertia = np.asarray(host["body_inv_inertia"], dtype=np.float64)[dynamic]
+        faces = resting_faces(host["body_shape"][dynamic], size, rotation, inv_inertia, 1.0 / mass, up)
+        terms, count, fall = column_weights(p, mass, max(width, 1e-6), up, radius, faces)
 
     def sag(n: int) -> float:
         return g * terms / contact_omega(config.dt / n, config.contact_hertz) ** 2
 
     speed = math.sqrt(2.0 * g * fall)
-    chosen = requested
+    chosen, raised_by = requested, ""
     if config.auto_substeps:
-        while ((sag(chosen) > config.column_sag or landing_transient(speed, config.dt, chosen) > config.landing_depth)
-               and chosen < MAX_AUTO_SUBSTEPS):
+        while chosen < MAX_AUTO_SUBSTEPS:
+            if landing_transient(speed, config.dt, chosen) > config.landing_depth:
+                raised_by = "landing"
+            elif sag(chosen) > config.column_sag:
+                raised_by = "sag"
+            else:
+                break
             chosen += 1
     return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), config.column_sag,
-                       bool(config.auto_substeps), speed, float(config.landing_depth), float(config.dt))
+                       bool(config.auto_substeps), speed, float(config.landing_depth), float(config.dt), raised_by)
