@@ -264,9 +264,9 @@ def volume_radius(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
     return np.where(shape == SHAPE_SPHERE, size[:, 0], box)
 
 
-def plan_substeps(model, config, pos: np.ndarray | None = None, rot: np.ndarray | None = None) -> SubstepPlan:
-    """The substeps to run for ``config`` on ``model`` (positions ``pos`` and rotation matrices
-    ``rot``, default the model's)."""
+def plan_substeps(model, config, state=None) -> SubstepPlan:
+    """The substeps to run for ``config`` on ``model``, its bodies posed as in ``state`` (default:
+    as the model places them)."""
     requested = int(config.substeps)
     g = float(np.linalg.norm(config.gravity))
     host = model.host
@@ -274,13 +274,14 @@ def plan_substeps(model, config, pos: np.ndarray | None = None, rot: np.ndarray 
     terms, count, fall = 0.0, 0, 0.0
     if g > 0.0 and config.body_contact and np.count_nonzero(dynamic) >= 2:
         up = -np.asarray(config.gravity, dtype=np.float64) / g
-        p = np.asarray(host["body_pos"] if pos is None else pos, dtype=np.float64)[dynamic]
+        pos, rot = (host["body_pos"], host["body_rot"]) if state is None else (state.body_pos.numpy(), state.body_rot.numpy())
+        p = np.asarray(pos, dtype=np.float64)[dynamic]
         mass = 1.0 / host["body_inv_mass"][dynamic].astype(np.float64)
         # a column one body wide: the median body's volume-equivalent diameter
         width = 2.0 * float(np.median(host["body_bound_radius"][dynamic])) / math.sqrt(3.0)
         radius = volume_radius(host["body_shape"][dynamic], np.asarray(host["body_size"], dtype=np.float64)[dynamic])
         size = np.asarray(host["body_size"], dtype=np.float64)[dynamic]
-        rotation = np.asarray(host["body_rot"] if rot is None else rot, dtype=np.float64)[dynamic]
+        rotation = np.asarray(rot, dtype=np.float64)[dynamic]
         inv_inertia = np.asarray(host["body_inv_inertia"], dtype=np.float64)[dynamic]
         faces = resting_faces(host["body_shape"][dynamic], size, rotation, inv_inertia, 1.0 / mass, up)
         terms, count, fall = column_weights(p, mass, max(width, 1e-6), up, radius, faces)

@@ -586,8 +586,7 @@ class Simulator:
             setattr(self.config, key, value)
         self.config.validate()
         # between steps (the graph is captured again below): plan on the columns standing now
-        self.substep_plan = plan_substeps(self.model, self.config, self.state.body_pos.numpy(),
-                                          self.state.body_rot.numpy())
+        self.substep_plan = plan_substeps(self.model, self.config, self.state)
         self.substeps = self.substep_plan.substeps
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
         self.solver = make_solver(self._solver_settings(), self.config.gravity, self.device, self.model.body_count)

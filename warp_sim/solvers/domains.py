@@ -35,7 +35,7 @@ The slabs themselves are cut by warp_sim/schedule/slabs.py, once per collision p
 import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
-from .impact import IMPACT_INNER, impact_begin_body, impact_terrain_body
+from .impact import IMPACT_INNER, impact_terrain_body
 from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
                          solve_one_pair, warm_start_pair_side)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
@@ -147,11 +147,7 @@ def domain_sweep(
         return
     body_first = slabs.domain_body_start[d]
     body_count = slabs.domain_body_start[d + 1] - body_first
-    if prepare != 0 and mode == MODE_IMPACT:
-        for k in range(body_count):
-            impact_begin_body(slabs.domain_body[body_first + k], model, settings, reset_reference, state_in,
-                              solver)
-    elif prepare != 0:
+    if prepare != 0:
         for k in range(body_count):
             prepare_body(slabs.domain_body[body_first + k], model, settings, reset_reference, make_rows,
                          from_impact,

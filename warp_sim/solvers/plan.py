@@ -2,7 +2,7 @@
 
 After Box2D v3's solver stages (one list, consumed by each scheduler).  One substep is
 
-    [impact begin, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with restitution
+    [impact begin, pair contact times, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with restitution
     prepare, warm start
     `iterations` solve sweeps (soft bias)
     integrate
@@ -11,9 +11,9 @@ After Box2D v3's solver stages (one list, consumed by each scheduler).  One subs
 
 solver.py runs it colour by colour (the GPU schedule: one launch per stage, a sweep being the
 terrain launch then one launch per colour) and slab by slab (the CPU schedule, solvers/domains.py,
-which rides the per-body stages on the sweeps next to them: the impact begin on the first impact
-sweep, prepare and warm start on the first solve sweep, integrate on the last solve sweep,
-finalize on the last relax sweep).  ``reverse`` is the walk order of a sweep where the schedule
+which rides the per-body stages on the sweeps next to them: prepare and warm start on the first
+solve sweep, integrate on the last solve sweep, finalize on the last relax sweep; the impact
+begin is a launch of its own on both, as the pairs' contact times read it).  ``reverse`` is the walk order of a sweep where the schedule
 has one (slabs: symmetric Gauss-Seidel, see SoftStepSolver._step_domains); colours have none.
 The terrain-only fused kernel (soft_step.py) is the same sequence for one body, unrolled in one
 kernel.

@@ -342,6 +342,7 @@ def solve_and_integrate(
         v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
         hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
                              settings.h, settings.gravity, settings.restitution_threshold,
+                             settings.h, 0.0,  # no pairs on this path: nothing shadows a terrain point
                              slots.terrain_contact_active, slots.terrain_contact_point,
                              slots.terrain_contact_normal, slots.terrain_contact_depth, impact_normal,
                              impact_tangent)

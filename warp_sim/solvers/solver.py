@@ -20,7 +20,7 @@ from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
 from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
-from .impact import IMPACT_INNER, impact_begin, terrain_impact
+from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
 from .pair_overflow import OverflowPairs
 from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
@@ -88,6 +88,8 @@ class SoftStepSolver:
         self.solver_toi_shift = wp.zeros(n, dtype=wp.vec3, device=device)
         # the impact sweep that last changed a body's velocity (impact.unchanged_since)
         self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
+        # when the earliest of a body's pairs closes within the substep (impact.pair_contact_times)
+        self.solver_pair_toi = wp.zeros(n, dtype=float, device=device)
 
     def _soft(self, dt: float):
         # one vec4 object per dt, so recorded launches see an unchanged argument
@@ -232,6 +234,13 @@ class SoftStepSolver:
         launch(impact_begin, m.body_count, key=self, inputs=[
             a.model, a.settings, int(fresh_contacts), a.state_in, a.solver], device=self.device)
 
+    def _pair_contact_times(self, a):
+        """Each body's earliest pair event of the substep, which shadows its later terrain
+        impacts (impact.pair_contact_times); after the impact begin, before the impact sweeps."""
+        if a.contacts.pair_max > 0:
+            launch(pair_contact_times, a.contacts.pair_max, key=self, inputs=[
+                a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver], device=self.device)
+
     def _impact_sweep(self, m, a, pairs, impact_round: int):
         """One impact stage's IMPACT_INNER sweeps: every body's terrain impact, then the pairs'
         (colour by colour), numbered so that manifolds no impact has touched since are skipped."""
@@ -291,12 +300,14 @@ class SoftStepSolver:
         def impacts_again(sizes):
             nonlocal color_sizes
             color_sizes = sizes
+            self._pair_contact_times(a)
             impact_sweeps()
 
         for stage in plan:
             kind = stage.kind
             if kind == IMPACT_BEGIN:
                 self._impact_begin(m, a, fresh_contacts)
+                self._pair_contact_times(a)
             elif kind == IMPACT:
                 self._impact_sweep(m, a, pairs, stage.index)
             elif kind == AFTER_IMPACTS:
@@ -361,15 +372,19 @@ class SoftStepSolver:
         fused_with_relax = s.relax_iterations > 0
 
         def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
+            self._pair_contact_times(a)
             for again in plan:
                 if again.kind == IMPACT:
                     sweep(again.mode, again.reverse, impact_round=again.index)
 
         for stage in plan:
             kind = stage.kind
-            if kind == IMPACT:
-                # prepare: the impact begin
-                sweep(stage.mode, stage.reverse, prepare=int(stage.first), impact_round=stage.index)
+            if kind == IMPACT_BEGIN:
+                # its own launch: the pairs' contact times read every body's impact velocities
+                self._impact_begin(m, a, fresh_contacts)
+                self._pair_contact_times(a)
+            elif kind == IMPACT:
+                sweep(stage.mode, stage.reverse, impact_round=stage.index)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     after_impacts(impacts_again)
