@@ -236,10 +236,11 @@ class SoftStepSolver:
 
     def _pair_contact_times(self, a):
         """Each body's earliest pair event of the substep, which shadows its later terrain
-        impacts (impact.pair_contact_times); after the impact begin, before the impact sweeps."""
+        impacts (impact.pair_contact_times); after the impact begin, before the impact sweeps.
+        One launch, never split: Warp's CPU atomics are not atomic across chunks (launch.py)."""
         if a.contacts.pair_max > 0:
-            launch(pair_contact_times, a.contacts.pair_max, key=self, inputs=[
-                a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver], device=self.device)
+            wp.launch(pair_contact_times, dim=a.contacts.pair_max, device=self.device, inputs=[
+                0, a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver])
 
     def _impact_sweep(self, m, a, pairs, impact_round: int):
         """One impact stage's IMPACT_INNER sweeps: every body's terrain impact, then the pairs'
