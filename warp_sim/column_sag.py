@@ -274,6 +274,7 @@ def plan_substeps(model, config, state=None) -> SubstepPlan:
     terms, count, fall = 0.0, 0, 0.0
     if g > 0.0 and config.body_contact and np.count_nonzero(dynamic) >= 2:
         up = -np.asarray(config.gravity, dtype=np.float64) / g
+        # read back at build and between steps (update_settings), never inside a step
         pos, rot = (host["body_pos"], host["body_rot"]) if state is None else (state.body_pos.numpy(), state.body_rot.numpy())
         p = np.asarray(pos, dtype=np.float64)[dynamic]
         mass = 1.0 / host["body_inv_mass"][dynamic].astype(np.float64)

@@ -80,7 +80,7 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
-from .pair_geometry import pair_point_now
+from .pair_geometry import pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -629,10 +629,7 @@ def pair_contact_times(
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
-    vi = solver.solver_v[i]
-    wi = solver.solver_w[i]
-    vj = solver.solver_v[j]
-    wj = solver.solver_w[j]
+    vel = read_pair_velocity(solver, i, j)
     toi = settings.h
     for k in range(pairs.pair_point_count[p]):
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
@@ -640,7 +637,7 @@ def pair_contact_times(
                              solver.solver_drift_p[j], solver.solver_drift_r[i], solver.solver_drift_r[j],
                              model.body_sphere_radius[i], model.body_sphere_radius[j], model.body_inv_mass[i],
                              model.body_inv_mass[j])
-        vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
+        vn = wp.dot(vel.vi + wp.cross(vel.wi, now.arm_i) - vel.vj - wp.cross(vel.wj, now.arm_j), now.normal)
         if engaged(now.separation, vn, settings.h) and vn < -engage_speed(settings.gravity, settings.h):
             toi = time_to_contact(now.separation, vn, toi)
     if toi < settings.h:

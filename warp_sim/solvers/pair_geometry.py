@@ -30,7 +30,28 @@ leave the line when the balls slide past each other).
 
 import warp as wp
 
+from .solver_args import SolverBodies
+
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.struct
+class PairVelocity:
+    vi: wp.vec3
+    wi: wp.vec3
+    vj: wp.vec3
+    wj: wp.vec3
+
+
+@wp.func
+def read_pair_velocity(solver: SolverBodies, i: int, j: int) -> PairVelocity:
+    """Both bodies' velocities as the solver holds them now."""
+    vel = PairVelocity()
+    vel.vi = solver.solver_v[i]
+    vel.wi = solver.solver_w[i]
+    vel.vj = solver.solver_v[j]
+    vel.wj = solver.solver_w[j]
+    return vel
 
 
 @wp.struct

@@ -222,21 +222,18 @@ def overflow_impact_pass(
             continue
         split_i = split_count(solver_overflow_split, i)
         split_j = split_count(solver_overflow_split, j)
-        vi = solver.solver_v[i]
-        wi = solver.solver_w[i]
-        vj = solver.solver_v[j]
-        wj = solver.solver_w[j]
-        out = impact_pair_velocity(p, model, settings, pairs, solver, vi, wi, vj, wj, split_i * inv_mi,
+        vel = read_pair_velocity(solver, i, j)
+        out = impact_pair_velocity(p, model, settings, pairs, solver, vel.vi, vel.wi, vel.vj, vel.wj, split_i * inv_mi,
                                    split_j * inv_mj, split_i * solver.solver_inv_inertia[i],
                                    split_j * solver.solver_inv_inertia[j])
         if out.hit == 0:
             continue
         if inv_mi > 0.0:
-            add_split_change(solver_overflow_velocity, i, out.vi - vi, out.wi - wi, split_i)
+            add_split_change(solver_overflow_velocity, i, out.vi - vel.vi, out.wi - vel.wi, split_i)
             add_fixed(solver_overflow_shift, 3 * i, out.shift_i / split_i)
             wp.atomic_max(solver_overflow_hit, i, 1 + out.early)
         if inv_mj > 0.0:
-            add_split_change(solver_overflow_velocity, j, out.vj - vj, out.wj - wj, split_j)
+            add_split_change(solver_overflow_velocity, j, out.vj - vel.vj, out.wj - vel.wj, split_j)
             add_fixed(solver_overflow_shift, 3 * j, out.shift_j / split_j)
             wp.atomic_max(solver_overflow_hit, j, 1 + out.early)
 

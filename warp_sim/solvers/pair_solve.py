@@ -12,7 +12,7 @@ from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .contact_rows import closed_contact_bias, loaded_soft
-from .pair_geometry import pair_point_now
+from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
 
@@ -48,24 +48,6 @@ def heavy_partner_mass(inv_mass: float, other_inv_mass: float) -> float:
     if other_inv_mass > 0.0 and inv_mass >= CHAIN_MASS_RATIO * other_inv_mass:
         return 1.0 / other_inv_mass
     return 0.0
-
-
-@wp.struct
-class PairVelocity:
-    vi: wp.vec3
-    wi: wp.vec3
-    vj: wp.vec3
-    wj: wp.vec3
-
-
-@wp.func
-def read_pair_velocity(solver: SolverBodies, i: int, j: int) -> PairVelocity:
-    vel = PairVelocity()
-    vel.vi = solver.solver_v[i]
-    vel.wi = solver.solver_w[i]
-    vel.vj = solver.solver_v[j]
-    vel.wj = solver.solver_w[j]
-    return vel
 
 
 @wp.func
@@ -392,19 +374,10 @@ def chain_pair(
     reach_i = wp.length(model.body_size[i])
     reach_j = wp.length(model.body_size[j])
     for _pass in range(CHAIN_PASSES - 1):
-        before = PairVelocity()
-        before.vi = solver.solver_v[i]
-        before.wi = solver.solver_w[i]
-        before.vj = solver.solver_v[j]
-        before.wj = solver.solver_w[j]
+        before = read_pair_velocity(solver, i, j)
         sweep_body_terrain(light, model, settings, 1, slots, solver)
         solve_one_pair(p, MODE_SOLVE, model, settings, pairs, solver, 0, -1)
-        after = PairVelocity()
-        after.vi = solver.solver_v[i]
-        after.wi = solver.solver_w[i]
-        after.vj = solver.solver_v[j]
-        after.wj = solver.solver_w[j]
-        if pair_change(before, after, reach_i, reach_j) < settings.convergence_tolerance:
+        if pair_change(before, read_pair_velocity(solver, i, j), reach_i, reach_j) < settings.convergence_tolerance:
             break
 
 
