@@ -14,7 +14,7 @@ look never overwrites the recorded run); --out-dir chooses.  Cases (item of the 
 
     sleep_hit (1)              ball hits a sleeping ball (mass ratios, e); ball on a sleeping stack
     multipoint_restitution (2) flat cube bounce (apex e^2 H, no spin); face-on cubes; row of balls
-    impact_friction (3)        sphere hits a plane obliquely: Coulomb + Poisson impulse
+    impact_friction (3)        sphere hits a floor obliquely, cube lands sliding: Coulomb + Poisson
     resting_restitution (4)    stacks with e > 0; resting cube under g 100; heavy on light, e 0.5
     valley_roll (5)            ball rolling in a terrain valley, alone and with a second body
     late_impact_tunnel (6)     a hit sends a ball at a thin wall within the same step (8 phases)

@@ -244,29 +244,58 @@ def ball_row(quick: bool) -> list[dict]:
 # 3. Friction in impact impulses --------------------------------------------------------------
 
 def impact_friction(quick: bool) -> list[dict]:
-    """Zero gravity, a sphere (r 0.25) hits the plane y = 0 at (v_t, -v_n).  Coulomb friction
-    with Poisson restitution: the tangential impulse is min(mu (1 + e) m v_n, 2/7 m v_t) (the
-    second once the contact point stops sliding: a sphere rolls when v_t drops by 2/7)."""
+    """Zero gravity, a sphere (r 0.25) hits a floor (the plane y = 0, or a static box whose top is
+    there) at (v_t, -v_n).  Coulomb friction with Poisson restitution: the tangential impulse is
+    min(mu (1 + e) m v_n, 2/7 m v_t) (the second once the contact point stops sliding: a sphere
+    rolls when v_t drops by 2/7).  And a cube (half 0.25) landing flat while sliding: one force F
+    against the slide, a below the centre, so v_x = v_t - F / m, L_z = -a F and no sideways
+    velocity; F = min(mu (1 + e) m v_n, 0.4 m v_t) (the face sticks at k_t = 2.5 / m)."""
     rows = []
     variants = [(0.5, 0.1, 3.0, 5.0), (0.0, 0.1, 3.0, 5.0)]
     if not quick:
         variants += [(0.5, 0.05, 3.0, 5.0), (0.8, 0.2, 4.0, 3.0), (0.5, 0.5, 3.0, 5.0)]
     r = 0.25
-    for e, mu, vt, vn in variants:
-        b = ModelBuilder(Material(restitution=e, friction=mu))
-        b.set_terrain(PlaneTerrain())
-        b.add_sphere(r, 1.0, position=(0.0, r + 0.5, 0.0), velocity=(vt, -vn, 0.0))
-        sim = simulate(b, gravity=ZERO_G, sleep=False)
-        sim.step(30)  # contact at t = 0.1 s, gone by t = 0.2 s
-        v = host(sim, "body_vel")[0]
-        want_t = vt - min(mu * (1 + e) * vn, 2.0 / 7.0 * vt)
-        tag = f"v ({vt:g}, -{vn:g}) e {e:g} mu {mu:g}"
-        # impulses exact to the solver's convergence (1e-5 m/s a sweep) and float32; 0.02 m/s
-        # (0.4 % of the approach speed) is a wide bound on both
-        rows.append(check("impact_friction_vt", 3, tag, "v_t' = v_t - min(mu (1+e) v_n, 2/7 v_t)", want_t, v[0],
-                          0.02, "m/s"))
-        rows.append(check("impact_friction_vn", 3, tag, "v_n' = e v_n", e * vn, v[1], 0.02, "m/s"))
+    for floor in ("plane", "static box"):
+        for e, mu, vt, vn in variants:
+            b = ModelBuilder(Material(restitution=e, friction=mu))
+            add_floor(b, floor)
+            b.add_sphere(r, 1.0, position=(0.0, r + 0.5, 0.0), velocity=(vt, -vn, 0.0))
+            sim = simulate(b, gravity=ZERO_G, sleep=False)
+            sim.step(30)  # contact at t = 0.1 s, gone by t = 0.2 s
+            v = host(sim, "body_vel")[-1]
+            want_t = vt - min(mu * (1 + e) * vn, 2.0 / 7.0 * vt)
+            tag = f"{floor}, v ({vt:g}, -{vn:g}) e {e:g} mu {mu:g}"
+            # impulses exact to the solver's convergence (1e-5 m/s a sweep) and float32; 0.02 m/s
+            # (0.4 % of the approach speed) is a wide bound on both
+            rows.append(check("impact_friction_vt", 3, tag, "v_t' = v_t - min(mu (1+e) v_n, 2/7 v_t)", want_t,
+                              v[0], 0.02, "m/s"))
+            rows.append(check("impact_friction_vn", 3, tag, "v_n' = e v_n", e * vn, v[1], 0.02, "m/s"))
+    half, vt, vn = 0.25, 3.0, 5.0
+    for floor in ("plane", "static box"):
+        for e, mu in [(0.5, 0.1), (0.5, 1.0)] if not quick else [(0.5, 0.1)]:
+            b = ModelBuilder(Material(restitution=e, friction=mu))
+            add_floor(b, floor)
+            b.add_box((half, half, half), 1.0, position=(0.0, half + 0.05, 0.0), velocity=(vt, -vn, 0.0))
+            sim = simulate(b, gravity=ZERO_G, sleep=False)
+            sim.step(6)
+            v = host(sim, "body_vel")[-1]
+            spin = host(sim, "body_angmom")[-1] / half  # as a speed at the arm (m = 1)
+            force = min(mu * (1 + e) * vn, 0.4 * vt)
+            tag = f"{floor}, cube, e {e:g} mu {mu:g}"
+            # a converged impact is exact to float32: 1e-4 of the approach speed
+            rows.append(check("impact_friction_cube_vt", 3, tag, "v_t' = v_t - F / m", vt - force, v[0], 5e-4, "m/s"))
+            rows.append(check("impact_friction_cube_spin", 3, tag, "L_z / a = -F", -force, spin[2], 5e-4, "m/s"))
+            rows.append(check("impact_friction_cube_sideways", 3, tag, "|v_z| + |L_x| / a + |L_y| / a = 0", 0.0,
+                              abs(v[2]) + abs(spin[0]) + abs(spin[1]), 5e-4, "m/s", kind="max"))
     return rows
+
+
+def add_floor(builder: ModelBuilder, floor: str):
+    """The plane y = 0, or a static box with its top face there."""
+    if floor == "plane":
+        builder.set_terrain(PlaneTerrain())
+    else:
+        builder.add_box((5.0, 0.5, 5.0), 1.0, position=(0.0, -0.5, 0.0), static=True)
 
 
 # 6. Impacts later in a step ------------------------------------------------------------------

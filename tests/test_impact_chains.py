@@ -57,7 +57,7 @@ def test_a_thin_plate_falling_on_a_plate_meets_it_before_the_ground(restitution,
     """A plate thinner than a substep's fall (h |v_n|: 31 mm at 7.5 m/s and h = 1/240 s) lets the
     falling plate's speculative ground contacts close within the substep through it.  The pair
     closes first; taking the ground's impact first, at the ground's time of impact, left the upper
-    plate 18 to 29 mm deep in a plate 20 to 30 mm thick (impact.shadowed).  The issue's 1 cm,
+    plate 18 to 29 mm deep in a plate 20 to 30 mm thick (impact_point.shadowed).  The issue's 1 cm,
     over thicknesses, drop heights, tilts, restitutions and a static or lighter or heavier lower
     plate (``None``: static); and the upper plate must end above the lower one."""
     b = ModelBuilder(Material(restitution=restitution, friction=0.5))

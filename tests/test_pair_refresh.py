@@ -2,7 +2,8 @@
 
 The refreshed manifold is stored in the solver's reference representation; what must hold is
 that the solver then reads exactly the contact a fresh narrow phase finds at the current pose:
-pair_point_now's gap is minus the fresh depth, and both arms end at the fresh point.  The poses
+pair_point_now's gap is minus the fresh depth, and both arms end at the anchor the fresh point
+stands for.  The poses
 here are random (plates, cubes, and balls on boxes, turned by up to 0.4 rad and moved by up to 5 cm since the
 reference pose), built by hand, so each kernel is checked alone.
 """
@@ -132,19 +133,26 @@ def random_case(rng, half_a, half_b, turn):
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, half_b, seed, device):
     """For each refreshed point the solver's gap is minus the fresh depth and both arms end at
-    the fresh point (float32 rounding on metre-sized bodies: 2e-5 m); the point count and order
-    are the fresh manifold's; a point whose feature id survives keeps its accumulated impulse.
-    Plates, cubes on plates, and a ball on a turning thin box (its one point follows the ball)."""
+    the anchor the fresh point stands for: the point lies midway across the gap found, the anchor
+    w of the way to i's surface (pair_geometry.anchor_weight; a sphere's support point), so at
+    p + (w - 1/2) (-depth) n (float32 rounding on metre-sized bodies: 2e-5 m); the point count and
+    order are the fresh manifold's; a point whose feature id survives keeps its accumulated
+    impulse.  Plates, cubes on plates, and a ball on a turning thin box (its one point follows the
+    ball)."""
     rng = np.random.default_rng(seed)
     checked = kept = 0
     for _ in range(8):
-        before, after, fresh = refresh(random_case(rng, half_a, half_b, rng.uniform(0.1, 0.4)), device=device)
+        case = random_case(rng, half_a, half_b, rng.uniform(0.1, 0.4))
+        before, after, fresh = refresh(case, device=device)
         assert after["refreshed"] == 1
         n = int(after["count"][0])
         assert n == fresh["count"]
+        inv_i, inv_j = case["inv_mass"]
+        w = 1.0 if case["shape"][0] == SHAPE_SPHERE else inv_i / (inv_i + inv_j)
+        anchor = fresh["point"][:n] + (w - 0.5) * -fresh["depth"][:n, None] * after["normal"][0]
         np.testing.assert_allclose(fresh["gap"][:n], -fresh["depth"][:n], atol=2e-5)
-        np.testing.assert_allclose(fresh["end_i"][:n], fresh["point"][:n], atol=2e-5)
-        np.testing.assert_allclose(fresh["end_j"][:n], fresh["point"][:n], atol=2e-5)
+        np.testing.assert_allclose(fresh["end_i"][:n], anchor, atol=2e-5)
+        np.testing.assert_allclose(fresh["end_j"][:n], anchor, atol=2e-5)
         old = {int(f): float(j) for f, j in zip(before["feature"][: int(before["count"][0])], before["impulse"])}
         for f, j in zip(after["feature"][:n], after["impulse"][:n]):
             if int(f) in old:

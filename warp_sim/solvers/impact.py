@@ -80,6 +80,7 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
+from .impact_point import coulomb_step, engage_speed, engaged, shadowed, time_to_contact
 from .pair_geometry import pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 
@@ -89,6 +90,9 @@ POINTS = 4
 # Gauss-Seidel sweeps over one manifold's points.  Four points of a face converge geometrically;
 # 16 sweeps leave a flat-dropped cube's spin under 1e-4 of its bounce speed per metre.
 IMPACT_ITERATIONS = 16
+# The friction sweeps stop once no point's update takes more slip than this [m/s] (as the relax's
+# SimConfig.convergence_tolerance): Coulomb's discs taken in turn converge geometrically too.
+IMPACT_SLIP_TOLERANCE = 1.0e-5
 # Rounds of sweeps over all manifolds of a substep, and sweeps a round (alternating direction).
 # 4 x 1 carry straight chains in either order; a plate struck onto a column of four needs more
 # (module docstring): at 4 x 4 the deepest pair of the audit's plate rain fell from 28.9 to 22.9 mm
@@ -148,46 +152,10 @@ def row3(m: wp.mat44, k: int) -> wp.vec3:
 
 
 @wp.func
-def engaged(gap: float, vn: float, h: float) -> bool:
-    return gap <= 0.0 or gap + h * vn < 0.0
-
-
-@wp.func
-def shadowed(gap: float, vn: float, pair_toi: float, margin: float) -> bool:
-    """A terrain point still more than ``margin`` (column_sag) from the ground when one of the body's
-    pairs closes (``pair_toi``, pair_contact_times): the body meets that other body first.  Nearer,
-    the two are one contact at the soft contact's scale: a plate resting on the ground against
-    another has its pair touching and terrain points microns open, and holding those back (any
-    margin up to 1 mm) changed how piles of plates settle, one rain's deepest pair 6.5 -> 15.9 mm."""
-    return gap + vn * pair_toi > margin
-
-
-@wp.func
-def engage_speed(gravity: wp.vec3, h: float) -> float:
-    """The closing speed from which a contact takes part in the impact stage: one substep of
-    gravity, the most a contact holding a load approaches by before the solve (1 mm/s without
-    gravity, under which a substep closes less than a micrometre)."""
-    return wp.max(wp.length(gravity) * h, 1.0e-3)
-
-
-@wp.func
 def unchanged_since(stamp: int, since: int) -> bool:
     """A body whose velocity no impact has changed since sweep ``since`` (the sweep in which the
     manifold at hand was last taken; < 0 in a substep's first sweep, which takes every manifold)."""
     return since >= 0 and stamp < since
-
-
-@wp.func
-def coulomb_step(old_t: wp.vec3, vt: wp.vec3, k_t: float, limit: float) -> wp.vec3:
-    """The accumulated tangential impulse after pushing against the slip vt, clamped to the disc."""
-    new_t = old_t
-    slip = wp.length(vt)
-    if slip > 1.0e-9:
-        new_t = old_t - (slip / k_t) * (vt / slip)
-    mag = wp.length(new_t)
-    if mag > limit:
-        new_t = new_t * (limit / mag)
-    return new_t
 
 
 @wp.struct
@@ -199,17 +167,6 @@ class ImpactOutcome:
     v: wp.vec3
     shift: wp.vec3
     hit: int
-
-
-@wp.func
-def time_to_contact(gap: float, vn: float, toi: float) -> float:
-    """The earlier of ``toi`` and when a point at ``gap`` closing at ``vn`` touches (0 when it
-    already touches: the body is in contact from the substep's start)."""
-    if gap <= 0.0:
-        return 0.0
-    if vn < 0.0:
-        return wp.min(toi, gap / (-vn))
-    return toi
 
 
 @wp.func
@@ -290,9 +247,11 @@ def impact_terrain(
             rn = wp.cross(terrain_contact_point[slot] - x, n)
             v = v + (inv_mass * e * acc) * n
             w = w + inv_inertia * (rn * (e * acc))
-    # friction on the whole normal impulse (1 + e) P_c, two sweeps so the points share it
+    # friction on the whole normal impulse (1 + e) P_c, swept until converged: two sweeps left a cube
+    # landing flat while sliding with a sideways drift (0.3 % of its slide) and a spin about the slide
     if mu > 0.0:
-        for _it in range(2):
+        for _it in range(IMPACT_ITERATIONS):
+            removed = float(0.0)  # the most slip speed a point's update took this sweep
             for slot in range(start, start + count):
                 acc = impact_normal[slot]
                 if acc > 0.0:
@@ -310,6 +269,9 @@ def impact_terrain(
                     impact_tangent[slot] = new_t
                     v = v + inv_mass * (new_t - old_t)
                     w = w + inv_inertia * wp.cross(arm, new_t - old_t)
+                    removed = wp.max(removed, k_t * wp.length(new_t - old_t))
+            if removed < IMPACT_SLIP_TOLERANCE:
+                break
     out.w = w
     out.v = v - toi * gravity
     out.shift = toi * (v_in - v)
@@ -480,7 +442,9 @@ def impact_pair_velocity(
     mu = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     if mu > 0.0:
         tangent = wp.mat44(0.0)  # rows: the accumulated tangential impulse of each point (x, y, z, -)
-        for _it in range(2):
+        # swept until converged, as for the terrain (impact_terrain says why)
+        for _it in range(IMPACT_ITERATIONS):
+            removed = float(0.0)
             for k in range(count):
                 if acc[k] > 0.0:
                     n = row3(normal, k)
@@ -505,6 +469,9 @@ def impact_pair_velocity(
                     wi = wi + inv_ii * wp.cross(ri, change)
                     vj = vj - inv_mj * change
                     wj = wj - inv_ij * wp.cross(rj, change)
+                    removed = wp.max(removed, k_t * wp.length(change))
+            if removed < IMPACT_SLIP_TOLERANCE:
+                break
     out.hit = 1
     out.early = int(early)
     out.vi = vi - gi

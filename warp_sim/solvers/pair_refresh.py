@@ -53,6 +53,18 @@ def turn_angle(rot: wp.mat33, ref_rot: wp.mat33) -> float:
     return wp.acos(wp.clamp(0.5 * (trace - 1.0), -1.0, 1.0))
 
 
+@wp.func
+def anchor_shift(w: float, closing: float, turn_along_n: float) -> float:
+    """How far along n to move a refreshed point so that pair_point_now's anchor, (w - 1/2) of the
+    stored gap off the point, is (w - 1/2) of the gap found now: with c = n . (D_i - D_j) n the
+    stored gap grows by c per unit shift, so delta = (w - 1/2) (n . moved + c delta), solved
+    exactly.  (|w - 1/2| c reaches 1 only for a body turned half a revolution in one step.)"""
+    den = 1.0 - (w - 0.5) * turn_along_n
+    if den < 0.5:
+        return 0.0
+    return (w - 0.5) * closing / den
+
+
 @wp.kernel
 def refresh_turned_pairs(
     tid_offset: int,
@@ -123,6 +135,8 @@ def refresh_turned_pairs(
     depth = wp.vec4(0.0)
     for k in range(m.count):
         at = wp.vec3(m.point[k, 0], m.point[k, 1], m.point[k, 2]) - (w * dpi + (1.0 - w) * dpj)
+        moved = (dpi + turn_i * (at - xi)) - (dpj + turn_j * (at - xj))
+        at = at + anchor_shift(w, wp.dot(moved, m.normal), wp.dot(m.normal, (turn_i - turn_j) * m.normal)) * m.normal
         moved = (dpi + turn_i * (at - xi)) - (dpj + turn_j * (at - xj))
         point[k] = at
         depth[k] = m.depth[k] + wp.dot(moved, m.normal)
