@@ -113,11 +113,28 @@ def area2(a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
     return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
 
 
+# A manifold is found up to a step's travel open, and a face landing tilted touches first at its
+# deepest point, then turns about it: the next point down is the one that closes first, at a rate
+# growing with its distance from the turn, not simply the one farthest away.  So the picks after
+# the deepest weigh each point's spread by 1 / (its height over the deepest + CLOSING_LENGTH).
+# Points within about CLOSING_LENGTH of the deepest count as touching together (a resting face,
+# sagging unevenly by up to column_sag, keeps the widest spread).  Picking by spread alone, a plate
+# landing on a corner of another kept four points of its face about that corner and dropped the
+# vertex 30 mm up; swung down by the turn, that vertex went 14 mm into the plate within a substep.
+CLOSING_LENGTH = 0.01
+
+
+@wp.func
+def closing_weight(height: float, deepest: float) -> float:
+    return 1.0 / (height - deepest + CLOSING_LENGTH)
+
+
 @wp.func
 def polygon_pick_four(poly: ClipPolygon) -> wp.vec4i:
-    """Four of 5..8 points: the deepest, the farthest from it, the largest triangle with those
-    two, then the point adding the most area outside that triangle.  The four span as much of
-    the patch as the points allow, which is what keeps a resting box from rocking."""
+    """Four of 5..8 points: the deepest, then by spread weighted to close first (CLOSING_LENGTH):
+    the farthest from the deepest, the largest triangle with those two, then the point adding the
+    most area outside that triangle.  The four span as much of a resting patch as the points
+    allow, which is what keeps a resting box from rocking."""
     i0 = int(0)
     for i in range(1, poly.count):
         if poly.point[i][2] < poly.point[i0][2]:
@@ -127,15 +144,18 @@ def polygon_pick_four(poly: ClipPolygon) -> wp.vec4i:
     best = float(-1.0)
     for i in range(poly.count):
         d = poly.point[i] - p0
-        if i != i0 and d[0] * d[0] + d[1] * d[1] > best:
-            best = d[0] * d[0] + d[1] * d[1]
+        weight = closing_weight(poly.point[i][2], p0[2])
+        score = (d[0] * d[0] + d[1] * d[1]) * weight * weight
+        if i != i0 and score > best:
+            best = score
             i1 = i
     p1 = poly.point[i1]
     i2 = int(-1)
     best = float(-1.0)
     for i in range(poly.count):
-        if i != i0 and i != i1 and wp.abs(area2(p0, p1, poly.point[i])) > best:
-            best = wp.abs(area2(p0, p1, poly.point[i]))
+        score = wp.abs(area2(p0, p1, poly.point[i])) * closing_weight(poly.point[i][2], p0[2])
+        if i != i0 and i != i1 and score > best:
+            best = score
             i2 = i
     p2 = poly.point[i2]
     # With sigma the triangle's orientation, q lies outside edge (a, b) when
@@ -146,6 +166,8 @@ def polygon_pick_four(poly: ClipPolygon) -> wp.vec4i:
     for i in range(poly.count):
         q = poly.point[i]
         gain = -wp.min(sigma * area2(p0, p1, q), wp.min(sigma * area2(p1, p2, q), sigma * area2(p2, p0, q)))
+        if gain > 0.0:
+            gain = gain * closing_weight(q[2], p0[2])
         if i != i0 and i != i1 and i != i2 and gain > best:
             best = gain
             i3 = i
