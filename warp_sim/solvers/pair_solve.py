@@ -281,6 +281,10 @@ def warm_start_pair_side(
     (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair.  The other body's reference
     pose is being reset by its own thread when ``reset_reference`` is set: it is then read from
     body_pos (drift zero), as that thread will write it."""
+    if side == 0 and pairs.pair_point_count[p] == 1:
+        # as solve_one_pair's warm start: the rolling resistance's accumulator starts each substep
+        # at zero (kept, a ball on a dynamic floor had its resistance once a step, 1 / substeps)
+        pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
     ij = pairs.pair_body[p]
     b = ij[side]
     inv_mass = model.body_inv_mass[b]
