@@ -82,6 +82,16 @@ def normal_mass_inverse(n: wp.vec3, ri: wp.vec3, rj: wp.vec3, inv_mi: float, inv
     return inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
 
 
+@wp.func
+def reset_rolling(p: int, pairs: PairContacts):
+    """A warm start's reset of a sphere pair's rolling-resistance accumulator (its second slot, as
+    its one point leaves that slot free): it starts each substep at zero.  Kept from substep to
+    substep it stays at its clamp, and a ball on a dynamic floor, warm-started across two slabs,
+    had its resistance once a step (1 / substeps of it)."""
+    if pairs.pair_point_count[p] == 1:
+        pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
+
+
 @wp.func(inline=True)
 def solve_pair_points(
     p: int,
@@ -120,8 +130,8 @@ def solve_pair_points(
     # rolling resistance of a sphere in the pair (terrain contacts: soft_step.solve_rolling); a
     # sphere's pair has one point, so the pair's second slot keeps its accumulated angular impulse
     rolling_arm = wp.max(model.body_rolling_arm[i], model.body_rolling_arm[j])
-    if mode == MODE_WARM_START and count == 1:
-        pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
+    if mode == MODE_WARM_START:
+        reset_rolling(p, pairs)
     radius_i = model.body_sphere_radius[i]
     radius_j = model.body_sphere_radius[j]
 
@@ -281,10 +291,9 @@ def warm_start_pair_side(
     (solvers/domains.py) and sum to MODE_WARM_START of solve_one_pair.  The other body's reference
     pose is being reset by its own thread when ``reset_reference`` is set: it is then read from
     body_pos (drift zero), as that thread will write it."""
-    if side == 0 and pairs.pair_point_count[p] == 1:
-        # as solve_one_pair's warm start: the rolling resistance's accumulator starts each substep
-        # at zero (kept, a ball on a dynamic floor had its resistance once a step, 1 / substeps)
-        pairs.pair_tangent_impulse[p * POINTS + 1] = wp.vec3(0.0)
+    if side == 0:
+        # one side's thread only (reset_rolling says why it must happen here too)
+        reset_rolling(p, pairs)
     ij = pairs.pair_body[p]
     b = ij[side]
     inv_mass = model.body_inv_mass[b]
