@@ -3,8 +3,7 @@
 One step of ``dt`` is ``substeps`` substeps of h = dt / substeps; ``substeps`` is the fewest, and
 with ``auto_substeps`` (the default) the simulator runs more where the columns the scene starts
 with would sag past ``column_sag`` under their soft contacts (column_sag.py; ``Simulator.substeps``
-and ``substep_plan`` say what runs and why).  With ``contact_update =
-"substep"`` each substep is
+and ``substep_plan`` say what runs and why).  With ``contact_update = "substep"`` each substep is
 
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
@@ -18,7 +17,6 @@ sleeping on, the sleep timers are updated (sleep.py).
 
 The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
 has body-body contact (``body_contact``), so a scene pays for what it uses.
-
 ``graph`` (default: on CUDA) captures the whole step, terrain, pairs, colours, substeps,
 restitution and sleeping, as one graph and replays it (on the CPU with Warp's CPU capture, which
 tests use to prove the CUDA contract).  Nothing inside a captured step is read back: launches
@@ -56,7 +54,7 @@ from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bi
 from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.pair_refresh import refresh_turned
-from .solvers.soft_step import RELAX_PASSES
+from .solvers.soft_step import CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
@@ -95,6 +93,7 @@ class SimConfig:
     max_push_velocity: float = 3.0
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
+    convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"
     auto_substeps: bool = True  # more substeps where the tallest column would sag past column_sag
     column_sag: float = 0.0075  # [m] soft-contact sag the auto substep count keeps columns under
@@ -135,6 +134,7 @@ class SimConfig:
             max_push_velocity=self.max_push_velocity,
             restitution_threshold=self.restitution_threshold,
             convergence_tolerance=self.convergence_tolerance,
+            convergence_gravity_share=self.convergence_gravity_share,
             solver=self.solver,
             overflow_pairs=self.overflow_pairs,
         )

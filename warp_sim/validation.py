@@ -375,6 +375,7 @@ SIM_SCHEMA = {
     "max_push_velocity": Number(gt=0),
     "restitution_threshold": Number(ge=0),
     "convergence_tolerance": Number(ge=0),
+    "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),
     "solver": Choice(SOLVERS),
     "sleep": Boolean(),

@@ -24,7 +24,8 @@ from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impa
 from .pair_overflow import OverflowPairs
 from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
-from .soft_step import RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate
+from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate,
+                        sweep_tolerance)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
@@ -51,6 +52,7 @@ class SolverSettings:
     soft_depth: float = 0.0075  # [m] SimConfig.column_sag: deeper, a contact's excess is pushed out in a substep
     restitution_threshold: float = 1.0
     convergence_tolerance: float = 1.0e-5
+    convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE
     solver: str = "soft_step"
     overflow_pairs: str = "auto"  # "auto": "split" on CUDA, "in_order" on the CPU (pair_overflow.py)
 
@@ -143,8 +145,8 @@ class SoftStepSolver:
     def _step_settings(self, dt: float) -> StepSettings:
         s = self.settings
         key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio, s.soft_depth,
-               s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.iterations,
-               s.relax_iterations, s.relax_passes)
+               s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.convergence_gravity_share,
+               s.iterations, s.relax_iterations, s.relax_passes)
         if getattr(self, "_settings_key", None) != key:
             # a new instance, never a changed one: recorded launches hold a packed copy (kernel_args.py)
             v = StepSettings()
@@ -152,7 +154,8 @@ class SoftStepSolver:
             v.soft_load = soft_load(dt, self.gravity, s.contact_hertz, s.damping_ratio)
             v.integrator, v.rotation = INTEGRATORS[s.integrator], ROTATIONS[s.rotation]
             v.max_push_velocity, v.restitution_threshold = s.max_push_velocity, s.restitution_threshold
-            v.convergence_tolerance = s.convergence_tolerance
+            v.convergence_tolerance = sweep_tolerance(s.convergence_tolerance, s.convergence_gravity_share,
+                                                      self.gravity, dt)
             v.iterations, v.relax_iterations = s.iterations, s.relax_iterations
             v.relax_passes = s.relax_passes
             self._settings_key, self._settings_value = key, v
