@@ -36,9 +36,12 @@ WORKTREE = "WORKTREE"
 
 # the default, and what a user may turn off for speed: the mid-step passes (README: contacts found
 # once per step; the refresh of turned pairs and the re-collision of outrun bodies) and the relax
-# passes that give a push-out speed back in full (relax_passes 1 is Box2D's single relax)
+# passes that give a push-out speed back in full (relax_passes 1 is Box2D's single relax); and the
+# default before the passes' convergence test followed gravity
 VARIANTS = {
     "defaults": {},
+    # the relax's former convergence test, a fixed 1e-5 m/s (solvers/soft_step.py: sweep_tolerance)
+    "fixed tolerance (share 0)": {"convergence_gravity_share": 0.0},
     "no mid-step passes": {"turn_refresh": 0.0, "recollide_outrun": False},
     "fast: that and relax_passes 1": {"turn_refresh": 0.0, "recollide_outrun": False, "relax_passes": 1},
 }
