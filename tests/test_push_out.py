@@ -96,6 +96,39 @@ def test_push_out_under_gravity_leaves_under_ten_tolerances(relax_passes, depth,
         assert fastest < bound
 
 
+def overlapping_on_the_ground(depth: float, ratio: float, half):
+    """A box ``depth`` into a dynamic box of mass ``ratio`` resting on the plane."""
+    b = ModelBuilder(Material(restitution=0.0, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    b.add_box(half, ratio, position=(0.0, half[1], 0.0))
+    b.add_box(half, 1.0, position=(0.0, 3 * half[1] - depth, 0.0))
+    return b
+
+
+@pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: push-out across a chain): the "
+                   "relax converges a pair's points and a body's terrain rows each on their own, so where the "
+                   "pushed body's partner rests on the ground one relax sweep gives back about half the push")
+@pytest.mark.parametrize("pair_schedule", ["domains", "colors"])
+@pytest.mark.parametrize("depth, ratio, half", [(0.005, 1.0, (0.5, 0.5, 0.5)), (0.02, 1.0, (0.5, 0.5, 0.5)),
+                                                (0.02, 10.0, (0.5, 0.5, 0.5)), (0.02, 3.0, (0.3, 0.1, 0.3))])
+def test_push_out_of_a_partner_on_the_ground_leaves_under_ten_tolerances(pair_schedule, depth, ratio, half, device):
+    """The law of the test above where the partner is not static but rests on the ground: kinetic
+    energy must not rise through the push-out, so every body moves under 10 tolerances.  It fails
+    today by up to 0.5 m/s on the slab schedule and 0.9 m/s on the colour schedule (both boxes
+    thrown up there), and the xfail is strict, so a fix shows here."""
+    if pair_schedule == "domains" and device != "cpu":
+        pytest.skip("the slab schedule runs on the CPU only")
+    config = SimConfig(sleep=False, allow_initial_overlap=True, pair_schedule=pair_schedule, device=device)
+    h = config.dt / config.substeps
+    bound = 10 * sweep_tolerance(config.convergence_tolerance, config.convergence_gravity_share, config.gravity, h)
+    sim = Simulator(overlapping_on_the_ground(depth, ratio, half).finalize(device), config)
+    fastest = 0.0
+    for _ in range(8):
+        sim.step()
+        fastest = max(fastest, float(np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max()))
+    assert fastest < bound
+
+
 @pytest.mark.parametrize("partner, ratio, half", [("terrain", 1.0, (0.5, 0.5, 0.5)), ("box", 1.0, (0.5, 0.5, 0.5)),
                                                 ("box", 3.0, (0.3, 0.1, 0.3))])
 def test_a_single_relax_pass_leaves_push_speed_behind(partner, ratio, half, device):
