@@ -356,7 +356,14 @@ def pair_pass(
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since)
+        p = color_pairs_sorted[index]
+        if mode == MODE_RELAX or mode == MODE_RELAX_CLOSED:
+            ij = pairs.pair_body[p]
+            before = read_pair_velocity(solver, ij[0], ij[1])
+            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
+            pairs.pair_relax_chain[p] = relax_chain_needed(p, before, model, settings, pairs, solver)
+        else:
+            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
 
 
 @wp.func
@@ -474,12 +481,14 @@ def chain_pass(
     solver: SolverBodies,
 ):
     """chain_pair over one colour after its solve launch (scenes whose dynamic masses differ 10-fold),
-    or relax_chain_pair after its relax launch (scenes with terrain contacts): a kernel of its own,
+    or relax_chain_pair after its relax launch for the pairs that launch flagged (pair_relax_chain;
+    scenes with terrain contacts): a kernel of its own,
     so pair_pass keeps its registers (the terrain sweep it inlines takes the kernel to the 255 cap
     on sm_90)."""
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
+        p = color_pairs_sorted[index]
         if mode == MODE_SOLVE:
-            chain_pair(color_pairs_sorted[index], model, settings, pairs, slots, solver)
-        else:
-            relax_chain_pair(color_pairs_sorted[index], mode, model, settings, pairs, slots, solver)
+            chain_pair(p, model, settings, pairs, slots, solver)
+        elif pairs.pair_relax_chain[p] != 0:
+            relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
