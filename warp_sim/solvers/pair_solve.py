@@ -27,7 +27,6 @@ MODE_IMPACT = 3  # impact.py: restitution and impact friction, before the warm s
 # relax of a scene with restitution: open gaps are left to the next substep's impact stage, which
 # bounces them with their full approach speed (a relax impulse would take part of it away)
 MODE_RELAX_CLOSED = 4
-RELAX_MODES = (MODE_RELAX, MODE_RELAX_CLOSED)
 
 # A light body pressed onto its terrain contacts by a much heavier one: plain Gauss-Seidel hands the
 # heavy body's load down through the light one by about m / M of it a sweep (the light body is
@@ -356,14 +355,7 @@ def pair_pass(
 ):
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        p = color_pairs_sorted[index]
-        if mode == MODE_RELAX or mode == MODE_RELAX_CLOSED:
-            ij = pairs.pair_body[p]
-            before = read_pair_velocity(solver, ij[0], ij[1])
-            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
-            pairs.pair_relax_chain[p] = relax_chain_needed(p, before, model, settings, pairs, solver)
-        else:
-            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
+        solve_one_pair(color_pairs_sorted[index], mode, model, settings, pairs, solver, impact_sweep, impact_since)
 
 
 @wp.func
@@ -402,71 +394,9 @@ def chain_pair(
             break
 
 
-# Push-out across a chain.  The relax converges a pair's points and a body's terrain rows each on
-# their own; where a pushed body's partner rests on the ground, the pair's relax hands half the push
-# to the partner, whose terrain rows then stop it, and the rest stayed (a unit cube started 2 cm
-# into another on the plane left at 0.51 m/s).  So after its relax a pair walks its bodies'
-# terrain rows and its own points again, up to CHAIN_PASSES - 1 times, until a pass moves neither
-# body by more than the tolerance: each pass hands back the share the last one left (half, for
-# equal masses).  Only a pair whose relax moved it by a substep of gravity's velocity or more
-# (relax_chain_needed) walks it.
-
-
-@wp.func
-def relax_chain_needed(p: int, before: PairVelocity, model: BodyModel, settings: StepSettings, pairs: PairContacts,
-                       solver: SolverBodies) -> int:
-    """1 when pair p's relax moved its bodies by |g| h or more and one of them, dynamic, has terrain
-    rows to hand the change to.  A smaller change leaves under |g| h behind, which gravity takes
-    within the substep (the body cannot rise off its contact by more than |g| h^2 / 2); walking every
-    pair whose relax changed anything at all took the 10k rain's relax sweeps from 12 to 41 ms a
-    step."""
-    ij = pairs.pair_body[p]
-    i = ij[0]
-    j = ij[1]
-    grounded = ((model.body_inv_mass[i] > 0.0 and solver.terrain_row_count[i] > 0)
-                or (model.body_inv_mass[j] > 0.0 and solver.terrain_row_count[j] > 0))
-    if not grounded:
-        return 0
-    change = pair_change(before, read_pair_velocity(solver, i, j), wp.length(model.body_size[i]),
-                         wp.length(model.body_size[j]))
-    return int(change >= wp.length(settings.gravity) * settings.h)
-
-
-@wp.func
-def relax_chain_pair(
-    p: int,
-    mode: int,
-    # Model
-    model: BodyModel,
-    # Settings
-    settings: StepSettings,
-    # Contacts in/out
-    pairs: PairContacts,
-    slots: TerrainContacts,
-    # Solver in/out
-    solver: SolverBodies,
-):
-    """After pair p's relax (MODE_RELAX or MODE_RELAX_CLOSED): its bodies' terrain rows and its points
-    again, until a pass moves neither body by more than the tolerance (comment above)."""
-    ij = pairs.pair_body[p]
-    i = ij[0]
-    j = ij[1]
-    use_bias = wp.where(mode == MODE_RELAX_CLOSED, -1, 0)
-    reach_i = wp.length(model.body_size[i])
-    reach_j = wp.length(model.body_size[j])
-    for _pass in range(CHAIN_PASSES - 1):
-        before = read_pair_velocity(solver, i, j)
-        sweep_body_terrain(i, model, settings, use_bias, slots, solver)
-        sweep_body_terrain(j, model, settings, use_bias, slots, solver)
-        solve_one_pair(p, mode, model, settings, pairs, solver, 0, -1)
-        if pair_change(before, read_pair_velocity(solver, i, j), reach_i, reach_j) < settings.convergence_tolerance:
-            break
-
-
 @wp.kernel
 def chain_pass(
     tid_offset: int,
-    mode: int,
     color: int,
     color_start: wp.array(dtype=wp.int32),
     color_pairs_sorted: wp.array(dtype=wp.int32),
@@ -480,15 +410,9 @@ def chain_pass(
     # Solver in/out
     solver: SolverBodies,
 ):
-    """chain_pair over one colour after its solve launch (scenes whose dynamic masses differ 10-fold),
-    or relax_chain_pair after its relax launch for the pairs that launch flagged (pair_relax_chain;
-    scenes with terrain contacts): a kernel of its own,
-    so pair_pass keeps its registers (the terrain sweep it inlines takes the kernel to the 255 cap
-    on sm_90)."""
+    """chain_pair over one colour, after its solve launch: a kernel of its own, launched only for
+    scenes whose dynamic masses differ 10-fold (SoftStepSolver), so pair_pass keeps its registers
+    (the terrain sweep it inlines takes the kernel to the 255 cap on sm_90)."""
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
-        p = color_pairs_sorted[index]
-        if mode == MODE_SOLVE:
-            chain_pair(p, model, settings, pairs, slots, solver)
-        elif pairs.pair_relax_chain[p] != 0:
-            relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
+        chain_pair(color_pairs_sorted[index], model, settings, pairs, slots, solver)
