@@ -26,15 +26,41 @@ LEFT_SPEED = 10 * SimConfig().convergence_tolerance
 
 
 def overlapping(depth: float, partner: str, ratio: float, half):
+    """A 1 kg box ``half`` overlapping its partner by ``depth``: the ground ("terrain"), a free box of
+    mass ``ratio`` without terrain ("box"), a static box lying on the plane ("static box"), or a
+    dynamic box of mass ``ratio`` resting on the plane ("box on the ground")."""
     b = ModelBuilder(Material(restitution=0.0, friction=0.5))
-    if partner == "terrain":
-        b.set_terrain(PlaneTerrain())
-        b.add_box(half, 1.0, position=(0.0, half[1] - depth, 0.0))
-    else:
+    if partner == "box":
         b.set_terrain(NoTerrain())
         b.add_box(half, ratio, position=(0.0, 0.0, 0.0))
         b.add_box(half, 1.0, position=(0.0, 2 * half[1] - depth, 0.0))
+        return b
+    b.set_terrain(PlaneTerrain())
+    floor = 0.0
+    if partner == "static box":
+        b.add_box((2.0, 0.25, 2.0), 1.0, position=(0.0, 0.25, 0.0), static=True)
+        floor = 0.5
+    elif partner == "box on the ground":
+        b.add_box(half, ratio, position=(0.0, half[1], 0.0))
+        floor = 2 * half[1]
+    b.add_box(half, 1.0, position=(0.0, floor + half[1] - depth, 0.0))
     return b
+
+
+def gravity_bound(config: SimConfig) -> float:
+    """10 tolerances under gravity: Gauss-Seidel's error after the last pass is a small multiple of
+    that pass's change, which is under sweep_tolerance (soft_step.py)."""
+    h = config.dt / config.substeps
+    return 10 * sweep_tolerance(config.convergence_tolerance, config.convergence_gravity_share, config.gravity, h)
+
+
+def fastest_over(sim: Simulator, steps: int) -> float:
+    """The fastest body's speed, the largest over ``steps`` steps."""
+    fastest = 0.0
+    for _ in range(steps):
+        sim.step()
+        fastest = max(fastest, float(np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max()))
+    return fastest
 
 
 @pytest.mark.parametrize("pair_schedule", ["domains", "colors"])
@@ -61,15 +87,6 @@ def test_push_out_leaves_no_speed_behind(pair_schedule, depth, partner, ratio, h
     assert gap > -depth + 1e-3
 
 
-def overlapping_static_floor(depth: float, half):
-    """A box ``depth`` into a static box lying on the plane (the pair relax under gravity)."""
-    b = ModelBuilder(Material(restitution=0.0, friction=0.5))
-    b.set_terrain(PlaneTerrain())
-    b.add_box((2.0, 0.25, 2.0), 1.0, position=(0.0, 0.25, 0.0), static=True)
-    b.add_box(half, 1.0, position=(0.0, 0.5 + half[1] - depth, 0.0))
-    return b
-
-
 @pytest.mark.parametrize("relax_passes", [RELAX_PASSES, 1])
 @pytest.mark.parametrize("depth", [0.005, 0.012, 0.02])
 @pytest.mark.parametrize("floor, half", [("terrain", (0.5, 0.5, 0.5)), ("terrain", (0.3, 0.1, 0.3)),
@@ -82,27 +99,12 @@ def test_push_out_under_gravity_leaves_under_ten_tolerances(relax_passes, depth,
     under 10 tolerances in every one of eight steps.  A single relax pass (Box2D's) is shown
     failing the same bound."""
     config = SimConfig(sleep=False, allow_initial_overlap=True, relax_passes=relax_passes, device=device)
-    h = config.dt / config.substeps
-    bound = 10 * sweep_tolerance(config.convergence_tolerance, config.convergence_gravity_share, config.gravity, h)
-    b = overlapping(depth, "terrain", 1.0, half) if floor == "terrain" else overlapping_static_floor(depth, half)
-    sim = Simulator(b.finalize(device), config)
-    fastest = 0.0
-    for _ in range(8):
-        sim.step()
-        fastest = max(fastest, float(np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max()))
+    bound = gravity_bound(config)
+    fastest = fastest_over(Simulator(overlapping(depth, floor, 1.0, half).finalize(device), config), 8)
     if relax_passes == 1:
         assert fastest > bound
     else:
         assert fastest < bound
-
-
-def overlapping_on_the_ground(depth: float, ratio: float, half):
-    """A box ``depth`` into a dynamic box of mass ``ratio`` resting on the plane."""
-    b = ModelBuilder(Material(restitution=0.0, friction=0.5))
-    b.set_terrain(PlaneTerrain())
-    b.add_box(half, ratio, position=(0.0, half[1], 0.0))
-    b.add_box(half, 1.0, position=(0.0, 3 * half[1] - depth, 0.0))
-    return b
 
 
 @pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: push-out across a chain): the "
@@ -119,14 +121,8 @@ def test_push_out_of_a_partner_on_the_ground_leaves_under_ten_tolerances(pair_sc
     if pair_schedule == "domains" and device != "cpu":
         pytest.skip("the slab schedule runs on the CPU only")
     config = SimConfig(sleep=False, allow_initial_overlap=True, pair_schedule=pair_schedule, device=device)
-    h = config.dt / config.substeps
-    bound = 10 * sweep_tolerance(config.convergence_tolerance, config.convergence_gravity_share, config.gravity, h)
-    sim = Simulator(overlapping_on_the_ground(depth, ratio, half).finalize(device), config)
-    fastest = 0.0
-    for _ in range(8):
-        sim.step()
-        fastest = max(fastest, float(np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max()))
-    assert fastest < bound
+    sim = Simulator(overlapping(depth, "box on the ground", ratio, half).finalize(device), config)
+    assert fastest_over(sim, 8) < gravity_bound(config)
 
 
 @pytest.mark.parametrize("partner, ratio, half", [("terrain", 1.0, (0.5, 0.5, 0.5)), ("box", 1.0, (0.5, 0.5, 0.5)),
