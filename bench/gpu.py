@@ -16,7 +16,9 @@ soon as it finishes (a run cut short keeps what it measured):
 5. determinism: two runs with sleeping on, state digests;
 6. device memory per body (every array the Simulator holds, and the device's own count);
 7. CPU against the device on a small scene (largest position difference);
-8. Newton's SolverXPBD on the same rain, when ``import newton`` works.
+8. body order: the 1M mixed rain with its bodies listed in a random order, stored as listed and
+   sorted at build (``body_order = "shape_morton"``, warp_sim/body_order.py);
+9. Newton's SolverXPBD on the same rain, when ``import newton`` works.
 
 ``--quick`` shrinks every count (the CPU test runs it: ``--quick --device cpu``).  Scenes are
 built with a vectorised copy of cases.terrain_drop (``rain_model``, checked against it in the
@@ -44,30 +46,43 @@ import warp as wp  # noqa: E402
 from bench.byte_model import per_body_step  # noqa: E402
 from bench.common import machine_info  # noqa: E402
 from warp_sim import FourierTerrain, SimConfig, Simulator  # noqa: E402
+from warp_sim.body_order import body_order  # noqa: E402
 from warp_sim.builder import box_checkpoints, inertia_box, random_quaternions  # noqa: E402
 from warp_sim.model import Model  # noqa: E402
 from warp_sim.types import SHAPE_BOX, SHAPE_SPHERE  # noqa: E402
 
 TERRAIN = FourierTerrain(amplitude=0.5)
 FULL = {"capture": 100_000, "spheres": 1_000_000, "mixed": [100_000, 1_000_000, 10_000_000], "determinism": 100_000,
-        "compare": 2_000, "newton": 10_000, "steps": 60, "settle": 30}
-QUICK = {"capture": 300, "spheres": 2_000, "mixed": [500, 2_000], "determinism": 300, "compare": 100, "newton": 100,
-         "steps": 5, "settle": 2}
+        "compare": 2_000, "order": 1_000_000, "newton": 10_000, "steps": 60, "settle": 30}
+QUICK = {"capture": 300, "spheres": 2_000, "mixed": [500, 2_000], "determinism": 300, "compare": 100, "order": 500,
+         "newton": 100, "steps": 5, "settle": 2}
 
 
-def rain_model(count: int, shape: str, device, spacing: float = 1.2, radius: float = 0.25, half: float = 0.25,
-               clearance: float = 0.5, friction: float = 0.6, rolling_resistance: float = 0.1, seed: int = 0,
-               terrain=TERRAIN) -> Model:
-    """cases.terrain_drop's bodies (same grid, heights, shapes, orientations), built with NumPy."""
-    rng = np.random.default_rng(seed)
+def rain_positions(count: int, spacing: float = 1.2, radius: float = 0.25, half: float = 0.25,
+                   clearance: float = 0.5, terrain=TERRAIN) -> np.ndarray:
+    """(count, 3) starting positions of cases.terrain_drop's grid."""
     side = int(math.ceil(math.sqrt(count)))
     idx = np.arange(count)
     gx = (idx % side - (side - 1) / 2.0) * spacing
     gz = (idx // side - (side - 1) / 2.0) * spacing
     reach = max(radius, float(np.linalg.norm((half,) * 3)))
-    gy = terrain.height(gx, gz) + clearance + reach
+    return np.stack([gx, terrain.height(gx, gz) + clearance + reach, gz], axis=1)
+
+
+def rain_model(count: int, shape: str, device, spacing: float = 1.2, radius: float = 0.25, half: float = 0.25,
+               clearance: float = 0.5, friction: float = 0.6, rolling_resistance: float = 0.1, seed: int = 0,
+               terrain=TERRAIN, order=None, body_scene_index=None, body_order: str = "scene") -> Model:
+    """cases.terrain_drop's bodies (same grid, heights, shapes, orientations), built with NumPy.
+
+    ``order``: the grid index of each stored body (default: the grid's order); ``body_scene_index``
+    and ``body_order`` go to the Model (the scene order a sorted model maps back to)."""
+    rng = np.random.default_rng(seed)
+    idx = np.arange(count)
+    gx, gy, gz = rain_positions(count, spacing, radius, half, clearance, terrain).T
     quats = random_quaternions(rng, count)
     sphere = np.full(count, shape == "sphere") | ((shape == "mix") & (idx % 2 == 0))
+    if order is not None:
+        gx, gy, gz, quats, sphere = gx[order], gy[order], gz[order], quats[order], sphere[order]
     q = np.where(sphere[:, None], np.array([0.0, 0.0, 0.0, 1.0]), quats)
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
     rot = _qm(q)
@@ -102,7 +117,7 @@ def rain_model(count: int, shape: str, device, spacing: float = 1.2, radius: flo
         "checkpoint_local": local.astype(np.float32),
         "checkpoints_per_edge": 3,
     }
-    return Model(h, terrain, device)
+    return Model(h, terrain, device, body_scene_index=body_scene_index, body_order=body_order)
 
 
 def _qm(q):
@@ -138,6 +153,19 @@ def rain(count, shape, device, body_contact, **config) -> Simulator:
     spacing = 0.9 if body_contact else 1.2
     return Simulator(rain_model(count, shape, device, spacing=spacing),
                      SimConfig(device=str(device), body_contact=body_contact, **config))
+
+
+def shuffled_rain(count: int, device, mode: str, seed: int = 1) -> Simulator:
+    """The mixed rain with body contact, its bodies listed in a random order (a scene assembled
+    from an unordered source) and stored in ``mode`` (warp_sim/body_order.py)."""
+    shuffle = np.random.default_rng(seed).permutation(count)
+    order, scene_index = shuffle, None
+    if mode != "scene":
+        shapes = np.where(shuffle % 2 == 0, SHAPE_SPHERE, SHAPE_BOX)
+        scene_index = body_order(shapes, rain_positions(count, spacing=0.9)[shuffle], mode)
+        order = shuffle[scene_index]
+    model = rain_model(count, "mix", device, spacing=0.9, order=order, body_scene_index=scene_index, body_order=mode)
+    return Simulator(model, SimConfig(device=str(device), body_contact=True, sleep=False))
 
 
 def digest(sim) -> str:
@@ -383,6 +411,23 @@ def main(argv=None) -> int:
         return {"bodies": n, "steps": steps, "max_position_difference_m": diff}
 
     report.part("cpu_vs_device", compare, estimate=20)
+
+    def orders():
+        n = size["order"]
+        out = {"bodies": n}
+        for mode in ("scene", "shape_morton"):
+            variant = "random order" + (", shape_morton" if mode != "scene" else "")
+            sim = shuffled_rain(n, device, mode)
+            sim.step(size["settle"], check=False)
+            sec = timed_steps(sim, steps)
+            report.row(part="body_order", bodies=n, variant=variant, ms_per_step=round(1000 * sec, 3),
+                       steps_per_s=round(1 / sec, 2))
+            out[f"{mode}_ms"] = round(1000 * sec, 3)
+            del sim  # free the first rain's device memory before the second is built
+        return out
+
+    # two builds and settles of the mixed rain at this size, as the mixed parts measured them
+    report.part("body_order", orders, estimate=2 * size["order"] * per_body_s["mixed"] * 3)
 
     def newton_rain():
         try:

@@ -120,6 +120,7 @@ class DemoScene:
     builder: ModelBuilder
     checkpoints_per_edge: int | None = None
     source: str = "<built-in>"
+    body_order: str = "scene"  # how the Model stores the bodies ([sim] body_order, warp_sim/body_order.py)
 
     @property
     def body_count(self) -> int:
@@ -226,7 +227,7 @@ class DemoController:
                 builder.bodies = [dict(b, restitution=self.material.restitution, friction=friction)
                                   for b in builder.bodies]
         per_edge = getattr(self.scene, "checkpoints_per_edge", None) or None
-        model = builder.finalize(self.config.device, per_edge)
+        model = builder.finalize(self.config.device, per_edge, self.scene.body_order)
         self.sim = Simulator(model, copy.deepcopy(self.config))
         self.history = History(self.sim, self.history_interval, self.history_budget)
         self._shown_terrain = self.sim.model.terrain

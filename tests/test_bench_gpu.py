@@ -18,12 +18,22 @@ def test_rain_model_is_the_terrain_drop_scene():
             np.testing.assert_array_equal(ours[key], ref[key], err_msg=key)
 
 
+def test_shuffled_rain_maps_back_to_its_random_order():
+    """bench/gpu.py's body-order part: the sorted model holds the shuffled scene's bodies, grouped
+    by shape, and maps back to that scene's order."""
+    listed = gpu.shuffled_rain(50, "cpu", "scene").model
+    sorted_ = gpu.shuffled_rain(50, "cpu", "shape_morton").model
+    assert np.all(np.diff(sorted_.host["body_shape"]) >= 0)
+    for key in ("body_pos", "body_quat", "body_shape", "body_inertia", "body_checkpoint_count"):
+        np.testing.assert_array_equal(sorted_.to_scene_order(sorted_.host[key]), listed.host[key], err_msg=key)
+
+
 def test_quick_run_writes_every_part(tmp_path):
     assert gpu.main(["--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "gpu.json").read_text())
     parts = result["parts"]
     for name in ("compile", "environment", "capture", "spheres_terrain", "mixed_500", "mixed_2000", "determinism", "memory",
-                 "cpu_vs_device", "newton"):
+                 "cpu_vs_device", "body_order", "newton"):
         assert parts[name]["status"] == "ok", (name, parts[name])
     assert parts["determinism"]["identical"]
     assert parts["spheres_terrain"]["byte_model"]["total"] > 0

@@ -25,7 +25,7 @@ def test_full_runs_default_to_results(tmp_path):
     assert common.output_dir(tmp_path, True, "scaling") == tmp_path
 
 
-@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain"])
+@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain", "body_order"])
 def test_quick_into_results_is_refused(bench):
     import importlib
 

@@ -156,6 +156,8 @@ BAD = {
     "unknown rotation": ({"sim": {"rotation": "euler"}},
                          ["[sim] rotation must be one of quaternion", "got 'euler'"]),
     "bad device": ({"sim": {"device": "tpu"}}, ["[sim] device", "got 'tpu'"]),
+    "unknown body order": ({"sim": {"body_order": "hilbert"}},
+                           ["[sim] body_order must be one of scene, morton, shape_morton, got 'hilbert'"]),
     "unknown terrain kind": ({"terrain": {"kind": "mountains"}},
                              ["[terrain] kind must be one of fourier, plane, none, got 'mountains'"]),
     "too many terms": ({"terrain": {**FOURIER, "terms": 33}}, ["[terrain] terms", "[1, 32]", "got 33"]),

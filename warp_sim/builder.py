@@ -21,7 +21,8 @@ import numpy as np
 from .model import Model
 from .terrain import NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
-from .validation import BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, ValidationError, check, check_array, check_fields
+from .validation import (BODY_ORDERS, BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, Choice, ValidationError, check,
+                         check_array, check_fields)
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 COLUMNS = ("shape", "size", "mass", "position", "orientation", "velocity", "angular_velocity", "restitution",
@@ -350,15 +351,28 @@ class ModelBuilder:
         # On a plane the corners are exact; curved terrain needs points between them.
         return 2 if isinstance(self.terrain, PlaneTerrain) else 3
 
-    def finalize(self, device="cpu", checkpoints_per_edge: int | None = None) -> Model:
-        per_edge = checkpoints_per_edge or self.default_checkpoints_per_edge()
-        return Model(self.host_arrays(per_edge), self.terrain, device)
+    def finalize(self, device="cpu", checkpoints_per_edge: int | None = None, body_order: str = "scene") -> Model:
+        """Upload the bodies as a Model.  ``body_order`` (body_order.py): ``"scene"`` keeps the
+        order they were added in; ``"morton"`` and ``"shape_morton"`` store them sorted for memory
+        locality, and the Model maps back (``body_scene_index``, ``to_scene_order``)."""
+        from .body_order import body_order as order_of
 
-    def host_arrays(self, per_edge: int) -> dict:
-        """The Model's host arrays (float32 / int32), computed column-wise."""
+        per_edge = checkpoints_per_edge or self.default_checkpoints_per_edge()
+        mode = check(Choice(BODY_ORDERS), body_order, "body_order")
+        if mode == "scene":  # nothing permuted: the arrays are exactly the added order's
+            return Model(self.host_arrays(per_edge), self.terrain, device)
+        c = self.columns()
+        order = order_of(c["shape"], c["position"], mode, static=c["static"])
+        return Model(self.host_arrays(per_edge, order), self.terrain, device, body_scene_index=order, body_order=mode)
+
+    def host_arrays(self, per_edge: int, order: np.ndarray | None = None) -> dict:
+        """The Model's host arrays (float32 / int32), computed column-wise; with ``order`` (a
+        permutation, body_order.py) internal body i is added body ``order[i]``."""
         from .limits import check_terrain_resolution
 
         c = self.columns()
+        if order is not None:
+            c = {key: column[order] for key, column in c.items()}
         n = len(c["shape"])
         shape, size, mass = c["shape"], c["size"], c["mass"]
         is_sphere = shape == SHAPE_SPHERE

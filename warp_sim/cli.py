@@ -183,7 +183,8 @@ def run_command(args) -> int:
                 "record_every": record_every, "threads": threads}
     metadata = provenance(scene_text, sim.config, device,
                           {"scene": scene.name, "scene_source": str(source), "total_steps": total,
-                           "record_every": record_every, "resumed_from": args.resume, "start_step": start})
+                           "record_every": record_every, "resumed_from": args.resume, "start_step": start,
+                           "body_order": sim.model.body_order})
     if chunk_dir(out).exists():
         print(f"warning: replacing the chunks of an unfinished run in '{chunk_dir(out)}' (read them first with "
               f"load_run('{out}') to keep them)", file=sys.stderr)

@@ -144,6 +144,8 @@ def info_command(args) -> int:
         f"settings    dt {cfg.dt:.6g} s, {cfg.substeps} substeps, {cfg.integrator}, {cfg.solver}, "
         f"{cfg.duration:g} s = {expected_steps(cfg.duration, cfg.dt):,} steps",
         f"substeps    {sim.substep_plan.describe()}",
+        *([f"order       bodies stored in {sim.model.body_order} order (body_order.py); recordings, exports and "
+           f"errors use the scene's"] if sim.model.body_order != "scene" else []),
         f"memory      {memory / 2**20:,.1f} MiB of Warp arrays (built on the CPU; CUDA holds the same)",
         f"cost        ~{cost * 1e3:,.3g} ms a step, all bodies awake, on the 2-core CI CPU "
         f"({'body contact' if cfg.body_contact else 'terrain only'} model of warp_sim/commands.py)",

@@ -26,14 +26,33 @@ class Model:
         body_checkpoint_start, body_checkpoint_count: the body's terrain contact slot range.
         checkpoint_body, checkpoint_local: per slot, its body and body-frame point [m].
         terrain_*: flat terrain description (see terrain.py).
+
+    Bodies may be stored in another order than the scene's (``body_order``, body_order.py):
+    ``body_scene_index`` (int64, on the host) gives for internal body i its scene index, and
+    ``body_internal_index`` is its inverse.  Every array above, and the State's, is in internal
+    order; ``to_scene_order`` turns a per-body array into scene order.  In the scene order both
+    are ``arange(body_count)``.
     """
 
-    def __init__(self, host: dict, terrain: Terrain, device):
+    def __init__(self, host: dict, terrain: Terrain, device, body_scene_index=None, body_order: str = "scene"):
         self.device = device
         self.terrain = terrain
         self.host = host
         self.body_count = len(host["body_shape"])
         self.checkpoint_count = len(host["checkpoint_body"])
+        self.body_order = body_order
+        self._scene_ordered = body_scene_index is None
+        if body_scene_index is None:
+            self.body_scene_index = np.arange(self.body_count, dtype=np.int64)
+            self.body_internal_index = self.body_scene_index
+        else:
+            from .body_order import inverse_order
+
+            self.body_scene_index = np.asarray(body_scene_index, dtype=np.int64)
+            if self.body_scene_index.shape != (self.body_count,):
+                raise ValueError(f"body_scene_index must have shape ({self.body_count},), "
+                                 f"got {self.body_scene_index.shape}")
+            self.body_internal_index = inverse_order(self.body_scene_index)
 
         def arr(name, dtype):
             return wp.array(host[name], dtype=dtype, device=device)
@@ -77,6 +96,24 @@ class Model:
         self.terrain_plane = wp.vec4(*fields["terrain_plane"])
         self.terrain_slope_bound = float(fields["terrain_slope_bound"])
         self.terrain_cubic_bound = float(fields["terrain_cubic_bound"])
+
+    def to_scene_order(self, values, axis: int = 0) -> np.ndarray:
+        """A per-body array (NumPy, or a Warp array such as ``sim.state.body_pos``) in internal
+        order, as a new NumPy array in scene order along ``axis`` (1 for frames x bodies):
+        element s is scene body s.  Always a copy, in the scene order too: on the CPU ``.numpy()``
+        is a view of the live state, which the next step overwrites."""
+        if isinstance(values, wp.array):
+            values = values.numpy()
+        if self._scene_ordered:
+            return np.array(values, copy=True)
+        return np.take(values, self.body_internal_index, axis=axis)
+
+    def from_scene_order(self, values, axis: int = 0) -> np.ndarray:
+        """The inverse of ``to_scene_order``: a per-body array in scene order, in internal order
+        (e.g. velocities to ``assign`` to ``sim.state.body_vel``)."""
+        if self._scene_ordered:
+            return np.array(values, copy=True)
+        return np.take(values, self.body_scene_index, axis=axis)
 
     @property
     def body_mass(self) -> np.ndarray:

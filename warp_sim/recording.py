@@ -30,7 +30,9 @@ frame is kept and ``summary`` says where (``stop_step``) and why (``stop_reason`
 Checkpoints: ``save_checkpoint`` writes what ``Simulator.snapshot()`` holds (every persistent
 array, plus the second state buffer) as plain arrays in an .npz (no pickle), with the run's
 settings as JSON; ``restore_checkpoint`` puts them back into a Simulator built from the same
-scene, after which stepping continues bit-identically on the CPU.
+scene, after which stepping continues bit-identically on the CPU.  They hold the arrays in the
+Model's internal body order (``[sim] body_order``, body_order.py) with that order itself
+(``body_scene_index``), and resume only into a Model that stores its bodies in the same order.
 """
 
 from __future__ import annotations
@@ -263,8 +265,9 @@ def save_checkpoint(path, sim, run_info: dict):
         arrays[f"state1_{i:03d}"] = a.numpy()
     for i, a in enumerate(_measured_arrays(sim)):
         arrays[f"measured_{i:03d}"] = a.numpy()
+    arrays["body_scene_index"] = sim.model.body_scene_index  # the arrays above are in this order
     info = dict(run_info, step_count=int(snap["step_count"]), array_count=len(snap["arrays"]),
-                checkpoint_format=CHECKPOINT_FORMAT)
+                body_order=sim.model.body_order, checkpoint_format=CHECKPOINT_FORMAT)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}.npz")
     np.savez(tmp, info=np.asarray(to_json(info)), **arrays)
     os.replace(tmp, path)
@@ -295,6 +298,15 @@ def restore_checkpoint(sim, info: dict, arrays: dict):
     """Put a checkpoint's arrays back into ``sim`` (built from the same scene and settings)."""
     import warp as wp
 
+    order = info.get("body_order", "scene")  # checkpoints written before body_order: the scene's
+    stored = arrays.get("body_scene_index", np.arange(sim.model.body_count))
+    moved = len(stored) == sim.model.body_count and not np.array_equal(stored, sim.model.body_scene_index)
+    if order != sim.model.body_order:
+        raise ValueError(f"--resume: the checkpoint stores its bodies in body_order {order!r}, this simulator in "
+                         f"{sim.model.body_order!r}: build it with [sim] body_order = {order!r}")
+    if moved:  # another body count is another scene, refused below
+        raise ValueError(f"--resume: the checkpoint's body_order {order!r} put the bodies in another order than this "
+                         f"simulator's (written by another version of body_order.py?)")
     targets = sim._persistent_arrays()
     if len(targets) != info["array_count"]:
         raise ValueError(f"--resume: the checkpoint holds {info['array_count']} state arrays but this scene's "

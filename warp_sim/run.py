@@ -18,6 +18,10 @@ returned as arrays (the in-memory API).
 
 Only ``sim.step`` is timed, with the device synchronised before each clock reading, and the
 first step is left out: it compiles or loads the kernels (and captures the CUDA graph).
+
+Frames and per-body arrays are recorded in scene order (``Model.to_scene_order``), whatever order
+the Model stores the bodies in (``[sim] body_order``, body_order.py): body s of a run file is
+always the scene's body s.
 """
 
 from __future__ import annotations
@@ -94,9 +98,10 @@ class _DeferredInterrupt:
 
 
 def static_record(sim) -> dict:
-    """Per-body and terrain arrays of a run: shape, size, terrain_*."""
-    return {"shape": sim.model.host["body_shape"].astype(np.int32),
-            "size": sim.model.host["body_size"].astype(np.float32), **sim.terrain_record()}
+    """Per-body and terrain arrays of a run: shape, size (in scene order), terrain_*."""
+    scene = sim.model.to_scene_order
+    return {"shape": scene(sim.model.host["body_shape"]).astype(np.int32),
+            "size": scene(sim.model.host["body_size"]).astype(np.float32), **sim.terrain_record()}
 
 
 def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=None,
@@ -129,12 +134,13 @@ def run(sim, steps: int, record_every: int = 1, progress: bool = True, writer=No
     sink = writer if writer is not None else _MemorySink(n)
     stats = {"frames": 0, "time": 0.0, "ke": 0.0, "pen": 0.0}
 
+    scene = sim.model.to_scene_order  # copies too: on the CPU .numpy() is a view of the live state buffer
+
     def record():
         s = sim.state
-        # copies: on the CPU .numpy() is a view of the live state buffer
         frame = {
-            "time": sim.time, "position": s.body_pos.numpy().copy(), "orientation": s.body_quat.numpy().copy(),
-            "velocity": s.body_vel.numpy().copy(), "angular_velocity": sim.angular_velocity(),
+            "time": sim.time, "position": scene(s.body_pos), "orientation": scene(s.body_quat),
+            "velocity": scene(s.body_vel), "angular_velocity": scene(sim.angular_velocity()),
             "kinetic_energy": sim.kinetic_energy(), "max_penetration": sim.max_penetration(),
             "contact_count": sim.contact_count(),
         }

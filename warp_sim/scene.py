@@ -3,7 +3,8 @@
     scene = load_scene("examples/scenes/balls_on_terrain.toml")
     sim = scene.build()                 # a Simulator on the scene's [sim] device
 
-A scene file has the top-level key ``name`` and the tables ``[sim]`` (SimConfig), ``[terrain]``,
+A scene file has the top-level key ``name`` and the tables ``[sim]`` (SimConfig, and
+``body_order``, which shapes the build: body_order.py), ``[terrain]``,
 ``[material]``, ``[[body]]`` (one body each) and ``[[layout]]`` (generated groups of bodies, see
 layouts.py).  Bodies are added in this order: every ``[[body]]``, then every ``[[layout]]``.
 Keys left out take the defaults of SimConfig, FourierTerrain, PlaneTerrain and Material.
@@ -34,9 +35,9 @@ from .builder import Material, ModelBuilder
 from .simulator import SimConfig, Simulator
 from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 from .validation import (  # noqa: F401  (the specs and schemas are re-exported for layouts.py and tests)
-    BODY_SCHEMA, FLOAT32_MAX, FOURIER_SCHEMA, MATERIAL_SCHEMA, NONE_SCHEMA, PLANE_SCHEMA, SIM_SCHEMA, TERRAIN_KIND,
-    Bad, Boolean, Choice, Count, Integer, Matrix, Number, Pattern, Point, String, ValidationError, Vector, check,
-    is_finite, is_number, show, where_key,
+    BODY_SCHEMA, FLOAT32_MAX, FOURIER_SCHEMA, MATERIAL_SCHEMA, NONE_SCHEMA, PLANE_SCHEMA, SIM_BUILD_SCHEMA, SIM_SCHEMA,
+    TERRAIN_KIND, Bad, Boolean, Choice, Count, Integer, Matrix, Number, Pattern, Point, String, ValidationError, Vector,
+    check, is_finite, is_number, show, where_key,
 )
 
 
@@ -89,6 +90,7 @@ class Scene:
     source: str = "<scene>"
     # (first body, end, origin) per [[body]] / [[layout]] table, for messages about a body index.
     origins: list = field(default_factory=list)
+    body_order: str = "scene"  # [sim] body_order: how the Model stores the bodies (body_order.py)
 
     @property
     def terrain(self):
@@ -99,7 +101,8 @@ class Scene:
         return self.builder.body_count
 
     def body_origin(self, index: int) -> str:
-        """Which table made body ``index`` (0-based, the simulator's numbering)."""
+        """Which table made body ``index`` (0-based, the scene's numbering: what recordings, exports
+        and errors use whatever ``body_order`` the Model stores the bodies in)."""
         for start, end, origin in self.origins:
             if start <= index < end:
                 if end - start == 1:
@@ -115,7 +118,7 @@ class Scene:
         if device is not None:
             config.device = str(device)
         check_scene_memory(self)  # refuse before allocating what the machine does not have
-        model = self.builder.finalize(config.device, self.checkpoints_per_edge)
+        model = self.builder.finalize(config.device, self.checkpoints_per_edge, self.body_order)
         return Simulator(model, config)
 
 
@@ -163,11 +166,13 @@ def _parse(data: dict, source: str) -> Scene:
     if not isinstance(name, str):
         raise SceneError(f"name must be a string, got {show(name)}")
 
-    config = SimConfig(**read_table(data.get("sim", {}), SIM_SCHEMA, "[sim]"))
+    sim = read_table(data.get("sim", {}), {**SIM_SCHEMA, **SIM_BUILD_SCHEMA}, "[sim]")
+    build = {key: sim.pop(key) for key in SIM_BUILD_SCHEMA if key in sim}
+    config = SimConfig(**sim)
     terrain, checkpoints_per_edge = _parse_terrain(data.get("terrain", {}))
     builder = ModelBuilder(Material(**read_table(data.get("material", {}), MATERIAL_SCHEMA, "[material]")))
     builder.set_terrain(terrain)
-    scene = Scene(name, config, builder, checkpoints_per_edge, source)
+    scene = Scene(name, config, builder, checkpoints_per_edge, source, **build)
 
     for i, table in enumerate(_array_of_tables(data, "body"), start=1):
         start = scene.body_count

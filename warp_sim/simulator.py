@@ -504,11 +504,11 @@ class Simulator:
         if int(self.bad_count.numpy()[0]) == 0:
             return
         steps = self.body_bad_step.numpy()
-        bad = np.where(steps >= 0)[0]
-        first = bad[np.argmin(steps[bad])]
+        bad = np.flatnonzero(steps >= 0)  # named: of the earliest step's bodies, the lowest scene index
+        first = min(bad[steps[bad] == steps[bad].min()], key=self.model.body_scene_index.__getitem__)
         step = int(steps[first]) + 1
         shape = "box" if self.model.host["body_shape"][first] == SHAPE_BOX else "sphere"
-        raise NonFiniteStateError(int(first), step, step * self.config.dt, shape)
+        raise NonFiniteStateError(int(self.model.body_scene_index[first]), step, step * self.config.dt, shape)
 
     def reset(self):
         self.states = [self.model.state(), self.model.state()]

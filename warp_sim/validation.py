@@ -28,6 +28,7 @@ SOLVERS = ("soft_step", "pushout")
 CONTACT_UPDATES = ("step", "substep")
 PAIR_SCHEDULES = ("auto", "domains", "colors")
 OVERFLOW_PAIRS = ("auto", "split", "in_order")
+BODY_ORDERS = ("scene", "morton", "shape_morton")  # body_order.py
 
 
 class ValidationError(ValueError):
@@ -391,6 +392,13 @@ SIM_SCHEMA = {
     "overflow_pairs": Choice(OVERFLOW_PAIRS),
     "allow_initial_overlap": Boolean(),
     "graph": Boolean(),
+}
+
+# [sim] keys that are not SimConfig fields: they shape the Model a scene builds
+# (ModelBuilder.finalize), not the stepping, so they cannot change between steps (update_settings)
+# and a checkpoint resumes only into a model built the same way (recording.restore_checkpoint).
+SIM_BUILD_SCHEMA = {
+    "body_order": Choice(BODY_ORDERS),
 }
 
 TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")
