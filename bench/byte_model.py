@@ -143,7 +143,9 @@ class ByteCounter:
         params = [arg.label for arg in kernel.adj.args]
         args = dict(zip(params, inputs))
         total = 0
-        if name in PAIR_KERNELS:
+        if name == "chain_pass":
+            total = self.chain_bytes(kernel, args, inputs)
+        elif name in PAIR_KERNELS:
             live = dim
             for counter in ("pair_count", "broad_pair_count"):
                 if counter in args:
@@ -164,6 +166,33 @@ class ByteCounter:
         entry = self.kernels[name]
         entry["launches"] += 1
         entry["bytes"] += total
+
+    def chain_bytes(self, kernel, args, inputs) -> int:
+        """chain_pass over one colour: every pair reads its flag (relax) and only the pairs that walk
+        touch their two bodies' terrain slots and velocities and their own points; after a solve
+        every pair of the colour walks (heavy-on-light scenes)."""
+        from warp_sim.solvers.pair_solve import MODE_SOLVE
+
+        starts = args["color_start"].numpy()
+        first, last = int(starts[args["color"]]), int(starts[args["color"] + 1])
+        pairs = args["color_pairs_sorted"].numpy()[first:last]
+        flags = args["pairs"].pair_relax_chain
+        total = 0
+        walking = len(pairs)
+        if args["mode"] != MODE_SOLVE:
+            walking = int(flags.numpy()[pairs].sum())
+            total += wp.types.type_size_in_bytes(flags.dtype) * len(pairs)
+        slot_count = args["slots"].terrain_contact_active.size
+        for value in launch_arrays(kernel, inputs):
+            if value.size > 0 and value.ptr != flags.ptr:
+                if value.size == slot_count:  # terrain slots: both bodies' ranges
+                    per_pair = 2 * math.ceil(slot_count / max(self.body_count, 1))
+                elif value.size == max(self.body_count, 1):
+                    per_pair = 2
+                else:  # per pair or per point
+                    per_pair = math.ceil(value.size / self.capacity)
+                total += wp.types.type_size_in_bytes(value.dtype) * min(value.size, walking * per_pair)
+        return total
 
     def __enter__(self):
         self._wp_launch = wp.launch

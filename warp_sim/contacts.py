@@ -84,6 +84,9 @@ class Contacts:
         self.pair_feature = wp.zeros(k, dtype=wp.int32, device=device)
         self.pair_normal_impulse = wp.zeros(k, dtype=float, device=device)
         self.pair_tangent_impulse = wp.zeros(k, dtype=wp.vec3, device=device)
+        # 1 where the pair's last relax let go of enough push to walk it down to the ground
+        # (pair_solve.relax_chain_needed; written by pair_pass, read by chain_pass)
+        self.pair_relax_chain = wp.zeros(m, dtype=wp.int32, device=device)
         self.prev_pair_count = wp.zeros(1, dtype=wp.int32, device=device)
         self.prev_pair_body = wp.zeros(m, dtype=wp.vec2i, device=device)
         self.prev_pair_point_count = wp.zeros(m, dtype=wp.int32, device=device)

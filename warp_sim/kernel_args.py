@@ -100,6 +100,7 @@ class PairContacts:
     pair_depth: wp.array(dtype=float)
     pair_normal_impulse: wp.array(dtype=float)
     pair_tangent_impulse: wp.array(dtype=wp.vec3)
+    pair_relax_chain: wp.array(dtype=wp.int32)
 
 
 @wp.struct

@@ -37,7 +37,8 @@ import warp as wp
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import IMPACT_INNER, impact_terrain_body
 from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
-                         solve_one_pair, warm_start_pair_side)
+                         pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
+                         warm_start_pair_side)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
@@ -68,6 +69,37 @@ def impact_sweep_since(impact_round: int, boundary: int, u: int) -> int:
     if impact_round == 0:
         return -1
     return impact_sweep_number(impact_round - 1, boundary, IMPACT_INNER - 1)
+
+
+@wp.func(inline=True)
+def solve_pair_in_slab(
+    p: int,
+    mode: int,
+    has_mass_ratio: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in/out
+    pairs: PairContacts,
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    sweep: int,
+    since: int,
+):
+    """Pair p in a slab's (or the boundary's) sweep, with the passes that follow it: the heavy-on-light
+    chain after a solve, the chain to the ground after a relax that let go of a push (pair_solve).  Inlined:
+    a func the C++ compiler does not inline gets the argument structs by value, a few kB a call."""
+    relax = mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
+    held = float(0.0)
+    if relax:
+        held = pair_normal_total(p, pairs)
+    solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
+    if mode == MODE_SOLVE and has_mass_ratio != 0:
+        chain_pair(p, model, settings, pairs, slots, solver)
+    if relax and relax_chain_needed(p, held, model, settings, pairs, solver) != 0:
+        relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
 
 
 @wp.kernel
@@ -135,9 +167,7 @@ def domain_sweep(
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
             for q in range(pair_count):
                 p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
-                solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
-                if mode == MODE_SOLVE and has_mass_ratio != 0:
-                    chain_pair(p, model, settings, pairs, slots, solver)
+                solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
         for k in range(slabs.boundary_body_count[0]):
             i = slabs.boundary_body[k]
             if integrate != 0:
@@ -190,9 +220,7 @@ def domain_sweep(
             else:
                 for k in range(pair_count):
                     p = slabs.domain_pair[walk(pair_first, pair_count, k, direction)]
-                    solve_one_pair(p, mode, model, settings, pairs, solver, sweep, since)
-                    if mode == MODE_SOLVE and has_mass_ratio != 0:
-                        chain_pair(p, model, settings, pairs, slots, solver)
+                    solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
     if integrate != 0 or finalize != 0:
         for k in range(body_count):
             i = slabs.domain_body[body_first + k]

@@ -22,7 +22,7 @@ from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
 from .pair_overflow import OverflowPairs
-from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, chain_pass, pair_pass
+from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
 from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate,
                         sweep_tolerance)
@@ -282,17 +282,17 @@ class SoftStepSolver:
                                    a.pairs, a.solver, self.solver_v, self.solver_w, sweep, since)
                     if mode == MODE_SOLVE and m.has_mass_ratio:
                         launch(chain_pass, 1, key=self, inputs=[
-                            color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
+                            mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
                             a.solver], device=dev)
                     continue
                 dim = 1 if color == COLOR_COUNT else size
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
                     a.solver], device=dev)
-                if mode == MODE_SOLVE and m.has_mass_ratio:
+                if (mode == MODE_SOLVE and m.has_mass_ratio) or (mode in RELAX_MODES and m.checkpoint_count > 0):
                     launch(chain_pass, dim, key=self, inputs=[
-                        color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots, a.solver],
-                        device=dev)
+                        mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
+                        a.solver], device=dev)
 
         plan = substep_plan(s.iterations, s.relax_iterations, m.has_restitution)
 
