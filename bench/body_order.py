@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -103,12 +102,8 @@ def child(order: str, count: int, settle: float, steps: int, device: str) -> dic
 
 
 def run_once(order: str, count: int, settle: float, steps: int, device: str) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--child", order, "--count", str(count), "--settle", str(settle),
-                          "--steps", str(steps), "--device", device], capture_output=True, text=True)
-    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
-    if out.returncode != 0 or not lines:
-        return {"status": f"failed: {(out.stderr.strip().splitlines() or ['no output'])[-1]}"}
-    return json.loads(lines[-1])
+    return common.run_child([sys.executable, __file__, "--child", order, "--count", str(count), "--settle", str(settle),
+                             "--steps", str(steps), "--device", device])
 
 
 def chart(rows: list[dict], path: Path, title: str):

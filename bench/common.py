@@ -34,6 +34,18 @@ def machine_info(device: str) -> dict:
     }
 
 
+def run_child(command: list[str]) -> dict:
+    """Run a benchmark's child process and return the JSON object on its last ``{`` line, or a
+    ``status`` naming the failure (the child's last stderr line): each timed run in a fresh process."""
+    import subprocess
+
+    out = subprocess.run(command, capture_output=True, text=True)
+    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
+    if out.returncode != 0 or not lines:
+        return {"status": f"failed: {(out.stderr.strip().splitlines() or ['no output'])[-1]}"}
+    return json.loads(lines[-1])
+
+
 def state_gate(sim, depth_slop: float = 0.01, speed_bound: float = 100.0) -> str:
     """'' when the state is valid, else the reason (Newton-style invalid-state check).
 

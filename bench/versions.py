@@ -29,7 +29,7 @@ from io import BytesIO
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench.common import RESULTS, machine_info, write_rows  # noqa: E402
+from bench.common import RESULTS, machine_info, run_child, write_rows  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 WORKTREE = "WORKTREE"
@@ -156,12 +156,7 @@ def unpack(rev: str, into: Path) -> Path:
 
 
 def run_once(tree: Path, count: int, settle: float, steps: int, config: dict) -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, str(tree), str(count), str(settle), str(steps),
-                          json.dumps(config)], capture_output=True, text=True)
-    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
-    if out.returncode != 0 or not lines:
-        return {"status": f"failed: {(out.stderr.strip().splitlines() or ['no output'])[-1]}"}
-    return json.loads(lines[-1])
+    return run_child([sys.executable, "-c", CHILD, str(tree), str(count), str(settle), str(steps), json.dumps(config)])
 
 
 def chart(rows: list[dict], path: Path, title: str):
