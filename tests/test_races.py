@@ -9,30 +9,43 @@ from warp_sim.builder import Material
 from warp_sim.race_check import RaceCheck, RaceError
 
 
-def pile(top_mass=1.0, **config) -> Simulator:
+def pile(top_mass=1.0, overlap=0.0, **config) -> Simulator:
     """Two boxes stacked, a ball resting against them and one falling onto them: pairs of both
     kinds, restitution, friction and terrain contact in the first steps.  A ``top_mass`` 10 times
     the bottom box's or more makes its pair walk the bottom box's terrain contacts too
-    (pair_solve.CHAIN_MASS_RATIO), writes the pair's thread must own."""
+    (pair_solve.CHAIN_MASS_RATIO), writes the pair's thread must own; so does an ``overlap`` of the
+    top box into the bottom one, whose push-out the relax walks down to the ground
+    (pair_solve.relax_chain_pair)."""
     b = ModelBuilder(Material(friction=0.6, restitution=0.3))
     b.set_terrain(PlaneTerrain())
     b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 0.5, 0.0))
-    b.add_box((0.5, 0.5, 0.5), top_mass, position=(0.1, 1.5, 0.0))
+    b.add_box((0.5, 0.5, 0.5), top_mass, position=(0.1, 1.5 - overlap, 0.0))
     b.add_sphere(0.3, 1.0, position=(0.8, 0.3, 0.0))
     b.add_sphere(0.25, 1.0, position=(0.0, 2.3, 0.1), velocity=(0.0, -2.0, 0.0))
-    return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=2, sleep_time=0.05, **config))
+    return Simulator(b.finalize(), SimConfig(dt=1 / 60, substeps=2, sleep_time=0.05, allow_initial_overlap=overlap > 0,
+                                             **config))
 
 
-@pytest.mark.parametrize("schedule,capturable,top_mass", [("colors", False, 1.0), ("colors", True, 1.0),
-                                                         ("domains", False, 1.0), ("colors", False, 50.0),
-                                                         ("domains", False, 50.0)])
-def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass):
+@pytest.mark.parametrize("schedule,capturable,top_mass,overlap", [
+    ("colors", False, 1.0, 0.0), ("colors", True, 1.0, 0.0), ("domains", False, 1.0, 0.0), ("colors", False, 50.0, 0.0),
+    ("domains", False, 50.0, 0.0), ("colors", False, 1.0, 0.02), ("domains", False, 1.0, 0.02)])
+def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overlap):
     """``capturable``: launches sized by capacities and bounds, as a captured step sizes them."""
-    sim = pile(top_mass, pair_schedule=schedule)
+    sim = pile(top_mass, overlap, pair_schedule=schedule)
     sim.pairs.capturable = capturable
-    sim.step()  # loads the modules outside the check
+    if overlap > 0.0:
+        # the push-out and its walk happen in the first step: checked too, after loading the modules
+        pile(top_mass, overlap, pair_schedule=schedule).step()
+    else:
+        sim.step()  # loads the modules outside the check
+    walked = 0
     with RaceCheck() as check:
-        sim.step(3)
+        for _ in range(3):
+            sim.step()
+            walked += int(sim.contacts.pair_relax_chain.numpy().sum())
+    if overlap > 0.0 and schedule == "colors":
+        # the walk to the ground, a launch of its own, for a pair its relax flagged
+        assert walked > 0 and check.checked.get("chain_pass", 0) > 0
     assert check.isolated.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
     # the neighbour-timer gather and the wake marks use atomics, so they run as one launch, never
     # split (launch.py); the slab schedule colours no pairs
