@@ -434,10 +434,8 @@ def relax_chain_needed(p: int, held: float, model: BodyModel, settings: StepSett
     rows to hand the change to.
 
     The speed the relax takes back is the normal impulse let go times 1/m_i + 1/m_j (less at an
-    arm, where the bodies also turn).  Which pairs walk decides the cost: taken by every pair whose
-    relax changed its velocities by |g| h, friction and spin included, the walk ran for the resting
-    piles' own contacts and cost 0.15 of the 10k rain's step; a pile's resting contacts hold their
-    impulse through the relax, so few pairs let go of a push."""
+    arm, where the bodies also turn): what a push leaves, unlike a change of friction or spin,
+    which the first trigger tried (any velocity change of |g| h) also counted."""
     if settings.relax_passes <= 1:
         return 0  # Box2D's single relax, the faster choice, leaves part of every push (soft_step.py)
     ij = pairs.pair_body[p]
