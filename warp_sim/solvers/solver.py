@@ -289,7 +289,10 @@ class SoftStepSolver:
                 launch(pair_pass, dim, key=self, inputs=[
                     mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
                     a.solver], device=dev)
-                if (mode == MODE_SOLVE and m.has_mass_ratio) or (mode in RELAX_MODES and m.checkpoint_count > 0):
+                # the heavy-on-light passes after a solve; after a relax the walk to the ground, which
+                # relax_passes = 1 never takes (pair_solve.relax_chain_needed)
+                if (mode == MODE_SOLVE and m.has_mass_ratio) or (mode in RELAX_MODES and m.checkpoint_count > 0
+                                                                and s.relax_passes > 1):
                     launch(chain_pass, dim, key=self, inputs=[
                         mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
                         a.solver], device=dev)
