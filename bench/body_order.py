@@ -194,11 +194,7 @@ def main(argv=None) -> int:
     csv_path, _ = common.write_rows("body_order", rows, meta, out_dir)
     chart(rows, out_dir / "body_order.png",
           f"{count:,} mixed bodies raining, by body order ({meta['cpu'][:40]}, {meta['cores']} cores)")
-    print("medians over the repeats:")
-    for line in summary(rows):
-        print(line)
-    print(f"wrote {csv_path} (.json, .png)")
-    return 0 if all(r["status"] == "ok" for r in rows) else 1
+    return common.finish_report(summary(rows), csv_path, rows)
 
 
 if __name__ == "__main__":

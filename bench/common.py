@@ -46,6 +46,16 @@ def run_child(command: list[str]) -> dict:
     return json.loads(lines[-1])
 
 
+def finish_report(summary_lines: list[str], csv_path: Path, rows: list[dict]) -> int:
+    """The end of a back-to-back benchmark: its medians, where it wrote, and the exit status (1 when
+    any run failed)."""
+    print("medians over the repeats:")
+    for line in summary_lines:
+        print(line)
+    print(f"wrote {csv_path} (.json, .png)")
+    return 0 if all(r["status"] == "ok" for r in rows) else 1
+
+
 def state_gate(sim, depth_slop: float = 0.01, speed_bound: float = 100.0) -> str:
     """'' when the state is valid, else the reason (Newton-style invalid-state check).
 

@@ -29,7 +29,7 @@ from io import BytesIO
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from bench.common import RESULTS, machine_info, run_child, write_rows  # noqa: E402
+from bench.common import RESULTS, finish_report, machine_info, run_child, write_rows  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 WORKTREE = "WORKTREE"
@@ -237,11 +237,7 @@ def main(argv=None) -> int:
                                                 "steps": args.steps}, args.out_dir)
     chart(rows, csv_path.with_suffix(".png"),
           f"{args.count} mixed bodies raining, back to back on {meta['cpu']} ({meta['cores']} cores)")
-    print("medians over the repeats:")
-    for line in summary(rows):
-        print(line)
-    print(f"wrote {csv_path} (.json, .png)")
-    return 0 if all(r["status"] == "ok" for r in rows) else 1
+    return finish_report(summary(rows), csv_path, rows)
 
 
 if __name__ == "__main__":
