@@ -54,7 +54,7 @@ from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bi
 from .launch import cpu_threads, launch
 from .model import Model
 from .solvers.pair_refresh import refresh_turned
-from .solvers.soft_step import CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES
+from .config import NonFiniteStateError, SimConfig  # noqa: F401 (SimConfig is imported from here too)
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
@@ -64,80 +64,6 @@ from .validation import check as check_value
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
-
-
-class NonFiniteStateError(RuntimeError):
-    def __init__(self, body: int, step: int, time: float, shape: str):
-        super().__init__(f"body {body} ({shape}) became non-finite at step {step} (t = {time:.6g} s)")
-        self.body = body
-        self.step = step
-
-
-@dataclass
-class SimConfig:
-    """Simulation settings, the ``[sim]`` table of a scene file (units SI)."""
-
-    dt: float = 1.0 / 60.0
-    substeps: int = 4  # the fewest: auto_substeps may run more (column_sag.py)
-    gravity: tuple[float, float, float] = (0.0, -9.81, 0.0)
-    duration: float = 5.0
-    integrator: str = "semi_implicit"
-    rotation: str = "quaternion"
-    device: str = "cpu"
-    seed: int = 0
-    iterations: int = 2
-    relax_iterations: int = 1
-    relax_passes: int = RELAX_PASSES  # passes a relax sweep may take over one body's or one pair's own points
-    contact_hertz: float | None = None  # None: 1/(4 h), 60 Hz at the defaults; a number caps it
-    damping_ratio: float = 10.0
-    max_push_velocity: float = 3.0
-    restitution_threshold: float = 1.0
-    convergence_tolerance: float = 1.0e-5
-    convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
-    solver: str = "soft_step"
-    auto_substeps: bool = True  # more substeps where the tallest column would sag past column_sag
-    column_sag: float = 0.0075  # [m] soft-contact sag the auto substep count keeps columns under
-    landing_depth: float = 0.01  # [m] transient depth the auto substep count keeps landings on piles under
-    sleep: bool = True
-    sleep_velocity: float = 0.05
-    sleep_time: float = 0.5
-    speculative_margin: float = 0.02
-    body_contact: bool = True
-    broad_phase: str = "grid"
-    contact_max: int = 0
-    contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
-    recollide_outrun: bool = True  # "step" updates: find the pairs again mid-step if a body outruns its reach
-    turn_refresh: float = 0.005  # [m] "step" updates: a pair whose bodies turned this far since the pass is found again; 0: never
-    pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
-    overflow_pairs: str = "auto"  # pairs past the colours: "split" (CUDA), "in_order" (CPU); solvers/pair_overflow.py
-    allow_initial_overlap: bool = False  # scenes: initial overlaps are a warning instead of an error
-    graph: bool | None = None  # capture the whole step as one graph and replay it; None: on CUDA only
-
-    def __post_init__(self):
-        self.validate()
-
-    def validate(self):
-        """Check every field with the [sim] rules (validation.SIM_SCHEMA); ValueError names the field."""
-        if not isinstance(self.device, str) and self.device is not None:
-            self.device = str(self.device)  # a wp.Device
-        check_fields(self, SIM_SCHEMA, "SimConfig")
-
-    def solver_settings(self) -> SolverSettings:
-        return SolverSettings(
-            integrator=self.integrator,
-            rotation=self.rotation,
-            iterations=self.iterations,
-            relax_iterations=self.relax_iterations,
-            relax_passes=self.relax_passes,
-            contact_hertz=self.contact_hertz,
-            damping_ratio=self.damping_ratio,
-            max_push_velocity=self.max_push_velocity,
-            restitution_threshold=self.restitution_threshold,
-            convergence_tolerance=self.convergence_tolerance,
-            convergence_gravity_share=self.convergence_gravity_share,
-            solver=self.solver,
-            overflow_pairs=self.overflow_pairs,
-        )
 
 
 @wp.kernel
