@@ -11,7 +11,7 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
-from .contact_rows import closed_contact_bias, loaded_soft
+from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
 from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
@@ -182,9 +182,10 @@ def solve_pair_points(
                 bias = float(0.0)
                 mass_scale = float(1.0)
                 impulse_scale = float(0.0)
+                vn = wp.dot(relative_velocity(vel, ri, rj), n)
+                if mode == MODE_RELAX_CLOSED and closed_during_substep(separation, vn, settings.h):
+                    continue
                 if separation > 0.0:
-                    if mode == MODE_RELAX_CLOSED:
-                        continue
                     bias = separation / settings.h
                 elif mode == MODE_SOLVE:
                     soft = settings.soft
@@ -194,7 +195,6 @@ def solve_pair_points(
                     bias = closed_contact_bias(separation, settings.h, soft, settings.max_push_velocity)
                     mass_scale = soft[1]
                     impulse_scale = soft[2]
-                vn = wp.dot(relative_velocity(vel, ri, rj), n)
                 old_t = pairs.pair_tangent_impulse[slot]
                 if acc == 0.0 and vn + bias >= 0.0 and old_t[0] == 0.0 and old_t[1] == 0.0 and old_t[2] == 0.0:
                     # idle and staying idle: no normal impulse, so a Coulomb disc of radius 0 and no

@@ -45,7 +45,7 @@ from ..column_sag import contact_hertz as contact_frequency
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
-from .contact_rows import closed_contact_bias
+from .contact_rows import closed_contact_bias, closed_during_substep
 from .impact import impact_terrain
 from .solver_args import StepSettings
 
@@ -161,11 +161,11 @@ def solve_terrain_contact(
     bias = float(0.0)
     mass_scale = float(1.0)
     impulse_scale = float(0.0)
+    if use_bias < 0 and closed_during_substep(separation, vn, h):
+        # relax of a scene with restitution: a gap open at the substep's start is left to the next
+        # substep's impact stage, which bounces it with its full approach speed (impact.py)
+        return vel
     if separation > 0.0:
-        if use_bias < 0:
-            # relax of a scene with restitution: an open gap is left to the next substep's impact
-            # stage, which bounces it with its full approach speed (impact.py)
-            return vel
         bias = separation / h
     elif use_bias > 0:
         bias = closed_contact_bias(separation, h, soft, max_push_velocity)
