@@ -36,7 +36,7 @@ class SimConfig:
     contact_hertz: float | None = None  # None: 1/(4 h), 60 Hz at the defaults; a number caps it
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
-    restitution_threshold: float = 1.0
+    restitution_threshold: float = 0.0  # [m/s] bounce only above this approach speed; 0: any impact (impact.py)
     convergence_tolerance: float = 1.0e-5
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"

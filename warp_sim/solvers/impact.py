@@ -37,10 +37,10 @@ impacts: with e = 1 the last ball leaves with the striker's velocity and the oth
 directions carry a straight chain in either body order.
 
 Which manifolds take part.  A manifold bounces (Poisson's e) when one of its engaged points closes
-faster than ``restitution_threshold``; it is still taken, inelastically (e = 0), when one closes
-faster than ``engage_speed`` (a substep of gravity: resting contacts stay below it).  Without
-the second rule a blow passed down a pile stopped at the first contact it reached below the
-threshold: a plate falling at 6.5 m/s on four plates left them all moving down at 0.3 to 1.1 m/s,
+faster than ``restitution_threshold`` (default 0, so every impact the stage takes bounces); it
+is still taken, inelastically (e = 0), when one closes faster than ``engage_speed`` (a substep
+of gravity: resting contacts stay below it).  Without the second rule a blow passed down a pile
+stopped at the first contact it reached below a 1 m/s threshold: a plate falling at 6.5 m/s on four plates left them all moving down at 0.3 to 1.1 m/s,
 each contact closing under 1 m/s, and the soft solve then let them sink 6 to 9 mm into each other.
 Gauss-Seidel carries such a chain slowly (a column pressed on the ground converges like a
 diffusion, about N^2 sweeps for N bodies), so the stage runs 16 sweeps; each counts as a sweep

@@ -50,7 +50,7 @@ class SolverSettings:
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     soft_depth: float = 0.0075  # [m] SimConfig.column_sag: deeper, a contact's excess is pushed out in a substep
-    restitution_threshold: float = 1.0
+    restitution_threshold: float = 0.0
     convergence_tolerance: float = 1.0e-5
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE
     solver: str = "soft_step"
