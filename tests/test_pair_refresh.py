@@ -32,7 +32,7 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
                    read_gap: wp.array(dtype=float), read_end_i: wp.array(dtype=wp.vec3),
                    read_end_j: wp.array(dtype=wp.vec3), fresh_count: wp.array(dtype=wp.int32)):
     """The fresh manifold at the current pose, and what the solver reads from the stored one."""
-    m = collide_pair(shape[0], pos[0], rot[0], half[0], shape[1], pos[1], rot[1], half[1], margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin)
     fresh_count[0] = m.count
     for k in range(m.count):
         fresh_depth[k] = m.depth[k]
@@ -82,7 +82,8 @@ def refresh(case, tolerance=0.0, device="cpu"):
               "depth": depths.numpy().copy(), "feature": features.numpy().copy(), "impulse": impulses.numpy().copy()}
     refreshed = wp.zeros(1, dtype=wp.int32, device=device)
     wp.launch(refresh_turned_pairs, 1, device=device, inputs=[
-        0, shape, half, bound, inv_mass, MARGIN, tolerance, pos, rot, ref_pos, ref_rot,
+        0, shape, half, bound, arrays([0, 0], wp.int32, device), inv_mass, MARGIN, tolerance, pos, rot, ref_pos,
+        ref_rot,
         bound, arrays([1], wp.int32, device), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device=device),
         count, n, points, depths, features, impulses, tangents, refreshed])
     wp.launch(fresh_and_read, 1, device=device, inputs=[shape, pos, rot, half, radius, inv_mass, ref_pos, ref_rot, n,
@@ -98,7 +99,7 @@ def refresh(case, tolerance=0.0, device="cpu"):
 def store_pass(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33),
                half: wp.array(dtype=wp.vec3), margin: float, normal: wp.array(dtype=wp.vec3), point: wp.array(dtype=wp.vec3),
                depth: wp.array(dtype=float), feature: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
-    m = collide_pair(shape[0], pos[0], rot[0], half[0], shape[1], pos[1], rot[1], half[1], margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin)
     count[0] = m.count
     normal[0] = m.normal
     for k in range(4):

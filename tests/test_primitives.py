@@ -46,7 +46,7 @@ def sphere_box_kernel(pos_a: wp.array(dtype=wp.vec3), size_a: wp.array(dtype=wp.
                       pos_b: wp.array(dtype=wp.vec3), rot_b: wp.array(dtype=wp.mat33),
                       size_b: wp.array(dtype=wp.vec3), margin: float, out: wp.array(dtype=Manifold)):
     i = wp.tid()
-    out[i] = collide_sphere_box(pos_a[i], size_a[i][0], pos_b[i], rot_b[i], size_b[i], margin)
+    out[i] = collide_sphere_box(pos_a[i], size_a[i][0], pos_b[i], rot_b[i], size_b[i], 0, margin)
 
 
 @wp.kernel
@@ -55,7 +55,7 @@ def box_box_kernel(pos_a: wp.array(dtype=wp.vec3), rot_a: wp.array(dtype=wp.mat3
                    rot_b: wp.array(dtype=wp.mat33), size_b: wp.array(dtype=wp.vec3), margin: float,
                    out: wp.array(dtype=Manifold)):
     i = wp.tid()
-    out[i] = collide_box_box(pos_a[i], rot_a[i], size_a[i], pos_b[i], rot_b[i], size_b[i], margin)
+    out[i] = collide_box_box(pos_a[i], rot_a[i], size_a[i], 0, pos_b[i], rot_b[i], size_b[i], 0, margin)
 
 
 @wp.kernel
@@ -73,8 +73,8 @@ def pair_kernel(shape_a: wp.array(dtype=int), pos_a: wp.array(dtype=wp.vec3), ro
                 rot_b: wp.array(dtype=wp.mat33), size_b: wp.array(dtype=wp.vec3), margin: float,
                 out: wp.array(dtype=Manifold)):
     i = wp.tid()
-    out[i] = collide_pair(shape_a[i], pos_a[i], rot_a[i], size_a[i], shape_b[i], pos_b[i], rot_b[i],
-                          size_b[i], margin)
+    out[i] = collide_pair(shape_a[i], pos_a[i], rot_a[i], size_a[i], 0, shape_b[i], pos_b[i], rot_b[i],
+                          size_b[i], 0, margin)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -368,6 +368,7 @@ class ModelBuilder:
     def host_arrays(self, per_edge: int, order: np.ndarray | None = None) -> dict:
         """The Model's host arrays (float32 / int32), computed column-wise; with ``order`` (a
         permutation, body_order.py) internal body i is added body ``order[i]``."""
+        from .collide.covered_faces import covered_faces
         from .limits import check_terrain_resolution
 
         c = self.columns()
@@ -386,6 +387,8 @@ class ModelBuilder:
             "body_shape": shape.astype(np.int32),
             "body_size": size.astype(np.float32),
             "body_bound_radius": bound.astype(np.float32),
+            "body_covered_faces": covered_faces(shape, size, c["position"], rot, c["static"],
+                                                SHAPE_BOX),
             "body_inv_mass": np.where(dynamic, 1.0 / mass, 0.0).astype(np.float32),
             "body_inertia": inertia.astype(np.float32),
             "body_inv_inertia": np.where(dynamic[:, None], 1.0 / inertia, 0.0).astype(np.float32),

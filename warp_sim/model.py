@@ -18,6 +18,7 @@ class Model:
         body_shape: SHAPE_SPHERE or SHAPE_BOX.
         body_size: sphere (radius, 0, 0) or box half-extents [m].
         body_bound_radius: radius of the bounding sphere about the centre of mass [m].
+        body_covered_faces: a static box's faces another static box covers (collide/covered_faces.py).
         body_inv_mass: 1/m [1/kg]; 0 for static bodies.
         body_inertia, body_inv_inertia: principal body-frame inertia and its inverse (diagonal,
             SEED.md 2: box M/12 (h^2+l^2, ...), sphere 2/5 M r^2); zero inverse for static bodies.
@@ -60,6 +61,7 @@ class Model:
         self.body_shape = arr("body_shape", wp.int32)
         self.body_size = arr("body_size", wp.vec3)
         self.body_bound_radius = arr("body_bound_radius", float)
+        self.body_covered_faces = arr("body_covered_faces", wp.int32)
         self.body_inv_mass = arr("body_inv_mass", float)
         self.body_inertia = arr("body_inertia", wp.vec3)
         self.body_inv_inertia = arr("body_inv_inertia", wp.vec3)

@@ -3,6 +3,7 @@ no face overlap) the nearest vertex or edge points.  Conventions: manifold.py.""
 
 import warp as wp
 
+from .covered_faces import points_through_covered
 from .manifold import (
     BOX_FEATURE_COUNT,
     EDGE_AXIS_MIN_LENGTH,
@@ -490,8 +491,19 @@ def with_nearest(m: Manifold, extra: Manifold) -> Manifold:
 
 
 @wp.func
-def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.vec3, rot_b: wp.mat33,
-                    half_b: wp.vec3, margin: float) -> Manifold:
+def through_covered(covered_a: int, rot_a: wp.mat33, covered_b: int, rot_b: wp.mat33, delta: wp.vec3,
+                    axis: wp.vec3) -> bool:
+    """Whether the axis, oriented from B to A (delta = pos_a - pos_b), leaves B out through a covered
+    face of B, or A (reversed) out through a covered face of A."""
+    if covered_a == 0 and covered_b == 0:
+        return False
+    normal = sign_of(wp.dot(delta, axis)) * axis
+    return points_through_covered(covered_b, rot_b, normal) or points_through_covered(covered_a, rot_a, -normal)
+
+
+@wp.func
+def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, covered_a: int, pos_b: wp.vec3,
+                    rot_b: wp.mat33, half_b: wp.vec3, covered_b: int, margin: float) -> Manifold:
     """Box A against box B by the separating-axis test, then a face or an edge manifold.
 
     Candidate axes: the three face normals of each box and the nine cross products a_i x b_j
@@ -510,6 +522,10 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.
     which also bounds how much deeper than the true depth a face manifold chosen this way can
     be.  Parallel edge pairs (|a_i x b_j| < EDGE_AXIS_MIN_LENGTH) have no axis.  A tie between
     face axes keeps the first (A's before B's).
+
+    An axis whose normal would leave B, or A, out through one of its covered faces
+    (covered_faces.py) is not a candidate: such a contact is the covering box's.  With no face
+    axis left there is no contact.
     """
     delta = pos_a - pos_b
     face_separation = float(-1.0e30)
@@ -520,11 +536,11 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.
         if k >= 3:
             axis = mat_column(rot_b, k % 3)
         s = box_pair_separation(delta, rot_a, half_a, rot_b, half_b, axis)
-        if s > face_separation:
+        if s > face_separation and not through_covered(covered_a, rot_a, covered_b, rot_b, delta, axis):
             face_separation = s
             face_axis = axis
             face_index = k
-    if face_separation >= margin:
+    if face_separation >= margin or face_separation < -1.0e29:
         return manifold_empty()
 
     edge_separation = float(-1.0e30)
@@ -537,7 +553,8 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, pos_b: wp.
             length = wp.length(axis)
             if length >= EDGE_AXIS_MIN_LENGTH:
                 s = box_pair_separation(delta, rot_a, half_a, rot_b, half_b, axis / length)
-                if s > edge_separation:
+                if s > edge_separation and not through_covered(covered_a, rot_a, covered_b, rot_b, delta,
+                                                               axis / length):
                     edge_separation = s
                     edge_axis = axis / length
                     edge_a = i

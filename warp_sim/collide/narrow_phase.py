@@ -29,6 +29,7 @@ def collide_pairs(
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
     body_bound_radius: wp.array(dtype=float),
+    body_covered_faces: wp.array(dtype=wp.int32),
     # Settings
     margin: float,
     # State in
@@ -54,8 +55,8 @@ def collide_pairs(
     j = ij[1]
     # each body's sweep (reach - bound radius) widens the speculative margin, see swept_reach
     pair_margin = margin + (body_reach[i] - body_bound_radius[i]) + (body_reach[j] - body_bound_radius[j])
-    m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i],
-                     body_shape[j], body_pos[j], body_rot[j], body_size[j], pair_margin)
+    m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i], body_covered_faces[i],
+                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin)
     pair_body[p] = ij
     pair_point_count[p] = m.count
     pair_normal[p] = m.normal

@@ -8,6 +8,7 @@ import warp as wp
 
 from ..types import SHAPE_BOX, SHAPE_SPHERE
 from .box_box import collide_box_box
+from .covered_faces import face_covered
 from .manifold import (  # noqa: F401  (re-exported: the pair functions' common vocabulary)
     BOX_EDGE_ID,
     BOX_FEATURE_COUNT,
@@ -57,7 +58,7 @@ def slab_side(x: float, half: float) -> float:
 
 @wp.func
 def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box_rot: wp.mat33,
-                       box_half: wp.vec3, margin: float) -> Manifold:
+                       box_half: wp.vec3, box_covered: int, margin: float) -> Manifold:
     """Sphere A against box B, in the box frame.
 
     Outside the box the closest box point to the centre q is clamp(q, -h, h); the normal is
@@ -68,6 +69,12 @@ def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box
     Inside, the clamp returns q itself (no direction), so the sphere is pushed out through the
     face of least slack h_k - |q_k|: depth = r + slack, feature that face, so a sphere sinking
     through a face keeps its id.
+
+    Covered faces (``box_covered``, covered_faces.py) are not surfaces: outside, the offset loses
+    its components out through them, so the normal of the edge a covered face bounds is the other
+    face's (a ball crossing the seam of two flush slabs touches the far slab's top, extended, not
+    its edge); a centre beyond covered faces only is the covering box's to touch, and gets no
+    contact here.  Inside, the sphere leaves by the uncovered face of least slack.
     """
     local = wp.transpose(box_rot) * (sphere_pos - box_pos)
     closest = wp.vec3(wp.clamp(local[0], -box_half[0], box_half[0]),
@@ -75,6 +82,14 @@ def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box
                       wp.clamp(local[2], -box_half[2], box_half[2]))
     region = wp.vec3(slab_side(local[0], box_half[0]), slab_side(local[1], box_half[1]),
                      slab_side(local[2], box_half[2]))
+    if box_covered != 0:
+        for k in range(3):
+            if region[k] != 0.0 and face_covered(box_covered, k, region[k]):
+                closest[k] = local[k]
+                region[k] = 0.0
+        if region[0] == 0.0 and region[1] == 0.0 and region[2] == 0.0 and (
+                wp.abs(local[0]) > box_half[0] or wp.abs(local[1]) > box_half[1] or wp.abs(local[2]) > box_half[2]):
+            return manifold_empty()
     offset = local - closest
     distance = wp.length(offset)
     normal_local = wp.vec3(0.0, 1.0, 0.0)
@@ -84,12 +99,14 @@ def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box
         normal_local = offset / distance
         depth = radius - distance
     else:
-        axis = int(0)
-        slack = box_half[0] - wp.abs(local[0])
-        for k in range(1, 3):
-            if box_half[k] - wp.abs(local[k]) < slack:
+        axis = int(-1)
+        slack = float(1.0e30)
+        for k in range(3):
+            if box_half[k] - wp.abs(local[k]) < slack and not face_covered(box_covered, k, sign_of(local[k])):
                 slack = box_half[k] - wp.abs(local[k])
                 axis = k
+        if axis < 0:
+            return manifold_empty()  # every face it could leave by is covered: it is inside the others
         side = sign_of(local[axis])
         normal_local = side * unit_axis(axis)
         region = normal_local
@@ -115,19 +132,20 @@ PAIR_FUNCTIONS = {
 
 
 @wp.func
-def collide_pair(shape_a: int, pos_a: wp.vec3, rot_a: wp.mat33, size_a: wp.vec3, shape_b: int, pos_b: wp.vec3,
-                 rot_b: wp.mat33, size_b: wp.vec3, margin: float) -> Manifold:
+def collide_pair(shape_a: int, pos_a: wp.vec3, rot_a: wp.mat33, size_a: wp.vec3, covered_a: int, shape_b: int,
+                 pos_b: wp.vec3, rot_b: wp.mat33, size_b: wp.vec3, covered_b: int, margin: float) -> Manifold:
     """Any pair through one call; ``size`` is the radius in [0] for a sphere, the half extents
     for a box.  (box, sphere) runs as (sphere, box) and flips the normal back, so the result
-    keeps this pair's (A, B) convention; points, depths and features are unchanged."""
+    keeps this pair's (A, B) convention; points, depths and features are unchanged.  ``covered``:
+    the box's covered-face mask (covered_faces.py; 0 for a sphere or a dynamic box)."""
     if shape_a == SHAPE_SPHERE and shape_b == SHAPE_SPHERE:
         return collide_sphere_sphere(pos_a, size_a[0], pos_b, size_b[0], margin)
     if shape_a == SHAPE_SPHERE and shape_b == SHAPE_BOX:
-        return collide_sphere_box(pos_a, size_a[0], pos_b, rot_b, size_b, margin)
+        return collide_sphere_box(pos_a, size_a[0], pos_b, rot_b, size_b, covered_b, margin)
     if shape_a == SHAPE_BOX and shape_b == SHAPE_SPHERE:
-        m = collide_sphere_box(pos_b, size_b[0], pos_a, rot_a, size_a, margin)
+        m = collide_sphere_box(pos_b, size_b[0], pos_a, rot_a, size_a, covered_a, margin)
         m.normal = -m.normal
         return m
     if shape_a == SHAPE_BOX and shape_b == SHAPE_BOX:
-        return collide_box_box(pos_a, rot_a, size_a, pos_b, rot_b, size_b, margin)
+        return collide_box_box(pos_a, rot_a, size_a, covered_a, pos_b, rot_b, size_b, covered_b, margin)
     return manifold_empty()

@@ -72,6 +72,7 @@ def refresh_turned_pairs(
     body_shape: wp.array(dtype=wp.int32),
     body_size: wp.array(dtype=wp.vec3),
     body_bound_radius: wp.array(dtype=float),
+    body_covered_faces: wp.array(dtype=wp.int32),
     body_inv_mass: wp.array(dtype=float),
     # Settings
     margin: float,
@@ -122,8 +123,8 @@ def refresh_turned_pairs(
         return
     # the pass's margin (collide_pairs): the reaches still cover the rest of the step
     pair_margin = margin + (body_reach[i] - body_bound_radius[i]) + (body_reach[j] - body_bound_radius[j])
-    m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i],
-                     body_shape[j], body_pos[j], body_rot[j], body_size[j], pair_margin)
+    m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i], body_covered_faces[i],
+                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin)
     xi = solver_ref_pos[i]
     xj = solver_ref_pos[j]
     dpi = body_pos[i] - xi
@@ -170,7 +171,8 @@ def refresh_turned(model, state, solver, pairs, contacts, margin: float, toleran
     list, colours and slabs do not change; ``refreshed_pairs`` counts the refreshes."""
     c = contacts
     launch(refresh_turned_pairs, pairs.live_dim, key=pairs, inputs=[
-        model.body_shape, model.body_size, model.body_bound_radius, model.body_inv_mass, margin, tolerance,
+        model.body_shape, model.body_size, model.body_bound_radius, model.body_covered_faces, model.body_inv_mass, margin,
+        tolerance,
         state.body_pos, state.body_rot, solver.solver_ref_pos, solver.solver_ref_rot, pairs.body_reach,
         c.pair_count, c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth, c.pair_feature,
         c.pair_normal_impulse, c.pair_tangent_impulse, refreshed_pairs], device=state.body_pos.device)
