@@ -135,6 +135,39 @@ def test_cube_on_plane_under_coarse_steps_settles_without_rising(gravity, dt, su
     assert abs(float(sim.state.body_vel.numpy()[0][1])) < 0.05
 
 
+@pytest.mark.parametrize("gravity", [30.0, 100.0, 300.0])
+@pytest.mark.parametrize("half, turn", [((0.25, 0.25, 0.25), 0.0), ((0.5, 0.2, 0.3), 0.4), ((0.1, 0.1, 0.1), 1.1)])
+@pytest.mark.parametrize("pair_schedule", ["none", "domains", "colors"])
+def test_box_set_on_a_level_plane_under_coarse_steps_does_not_move_sideways(gravity, half, turn, pair_schedule,
+                                                                             device):
+    """By symmetry a box set on a level plane moves only down into its sag.  Its rows start cold
+    (no impulse held), and two Gauss-Seidel sweeps in row order shared the load unevenly between
+    its corners: at dt 1/30, 1 substep it moved 13 mm sideways in its first step under g = 100
+    and 29 mm under g = 300.  Swept to convergence (soft_step.solve_sweeps), what is left is the
+    stopping rule's: a pass stops changing velocity by under share g h, and the geometric tail
+    after it is at most as large again, so the step moves it under 2 share g h^2 sideways.
+    ``none``: the terrain-only kernel; the others carry a far sphere so the staged solver runs."""
+    if pair_schedule == "domains" and device != "cpu":
+        pytest.skip("the slab schedule runs on the CPU only")
+    b = ModelBuilder(Material(restitution=0.5, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    b.add_box(half, 1.0, position=(0.0, half[1], 0.0), orientation=(0.0, np.sin(turn / 2), 0.0, np.cos(turn / 2)))
+    config = {}
+    if pair_schedule != "none":
+        b.add_sphere(0.2, 1.0, position=(5.0, 0.2, 0.0))
+        config["pair_schedule"] = pair_schedule
+    dt = 1.0 / 30.0
+    sim = simulator(b, device, gravity=(0.0, -gravity, 0.0), dt=dt, substeps=1, sleep=False, **config)
+    start = sim.state.body_pos.numpy()[0].astype(float)
+    sideways = 0.0
+    for _ in range(30):
+        sim.step()
+        moved = sim.state.body_pos.numpy()[0].astype(float) - start
+        sideways = max(sideways, float(np.hypot(moved[0], moved[2])))
+    bound = 2.0 * sim.config.convergence_gravity_share * gravity * dt ** 2
+    assert sideways < bound, (sideways, bound)
+
+
 @pytest.mark.parametrize("rolling_resistance", [0.02, 0.05])
 @pytest.mark.parametrize("radius", [0.1, 0.25])
 def test_rolling_resistance_on_a_box_floor_matches_the_plane(rolling_resistance, radius, device):

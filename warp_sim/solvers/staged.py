@@ -37,7 +37,8 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import solve_terrain_row
-from .soft_step import BodyVelocity, sweep_converged, apply_impulse, drift_rotation, solve_rolling, warm_start_terrain
+from .soft_step import (BodyVelocity, apply_impulse, drift_rotation, solve_rolling, solve_sweeps, sweep_converged,
+                        warm_start_terrain)
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -193,6 +194,13 @@ def sweep_body_terrain(
     # 2 cm deep without gravity then drifted off at 0.077 m/s), so a relax walks the body's own
     # rows again until a pass moves no point by more than the convergence tolerance.
     passes = wp.where(use_bias > 0 or count == 1, 1, settings.relax_passes)  # one point gives all back in one
+    if use_bias > 0 and count > 1:
+        # rows that hold no impulse yet start cold: swept until converged (soft_step.solve_sweeps)
+        holding = int(0)
+        for k in range(count):
+            if slots.terrain_contact_normal_impulse[solver.terrain_row_slot[start + k]] > 0.0:
+                holding = 1
+        passes = solve_sweeps(1, settings.relax_passes, count, holding)
     reach = wp.length(model.body_size[i])
     inv_inertia = solver.solver_inv_inertia[i]
     for _pass in range(passes):
