@@ -41,7 +41,7 @@ def tiled_floor(friction: float, tiles: int = 2, turn: float = 0.0, tile: float 
 @pytest.mark.parametrize("speed, radius, turn, tiles", [
     (2.0, 0.25, 0.0, 2), (4.0, 0.25, 0.0, 2), (8.0, 0.25, 0.0, 2), (8.0, 0.1, 0.0, 3), (6.0, 0.5, 0.7, 2),
     (12.0, 0.2, 0.3, 4)])
-def test_ball_rolling_across_seams_of_static_boxes_stays_on_the_floor(speed, radius, turn, tiles):
+def test_ball_rolling_across_seams_of_static_boxes_stays_on_the_floor(speed, radius, turn, tiles, device):
     """A ball rolling at ``speed`` across one or more seams.  On one box it stays at its rest
     height within the soft contact's sag (g / omega^2, 0.07 mm at the defaults); a seam adds
     nothing, so it may not rise by more than 1 mm, nor change speed by more than rolling friction's
@@ -52,7 +52,7 @@ def test_ball_rolling_across_seams_of_static_boxes_stays_on_the_floor(speed, rad
     start = -1.0 * along + np.array([0.0, radius, 0.0])
     ball = b.add_sphere(radius, 1.0, position=tuple(start), velocity=tuple(speed * along),
                         angular_velocity=tuple(speed / radius * axis))
-    sim = Simulator(b.finalize("cpu"), SimConfig(sleep=False))
+    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
     rise = 0.0
     for _ in range(int((1.0 + 4.0 * (tiles - 1)) / speed * 60) + 10):
         sim.step()
@@ -63,7 +63,7 @@ def test_ball_rolling_across_seams_of_static_boxes_stays_on_the_floor(speed, rad
 
 @pytest.mark.parametrize("speed, half, turn", [(2.0, 0.25, 0.0), (5.0, 0.25, 0.0), (5.0, 0.1, 0.4),
                                                (4.0, 0.4, -0.9)])
-def test_box_sliding_across_a_seam_of_static_boxes_slides_as_on_one_box(speed, half, turn):
+def test_box_sliding_across_a_seam_of_static_boxes_slides_as_on_one_box(speed, half, turn, device):
     """A cube sliding at ``speed`` with mu 0.2 stops after v^2 / (2 mu g) whether or not it crosses
     a seam (5 m/s: 6.4 m, past the seam at the origin).  Tolerance: 1 % of the distance
     (semi-implicit Euler under constant deceleration is exact but for the step the stop falls
@@ -73,14 +73,14 @@ def test_box_sliding_across_a_seam_of_static_boxes_slides_as_on_one_box(speed, h
     start = -1.0 * along + np.array([0.0, half, 0.0])
     cube = b.add_box((half, half, half), 1.0, position=tuple(start), orientation=yaw(turn),
                      velocity=tuple(speed * along))
-    sim = Simulator(b.finalize("cpu"), SimConfig(sleep=False))
+    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
     sim.step(int(speed / (0.2 * G) * 60) + 30)
     travelled = float(np.dot(sim.state.body_pos.numpy()[cube] - start, along))
     assert travelled == pytest.approx(speed ** 2 / (2 * 0.2 * G), rel=0.01)
     assert abs(float(sim.state.body_pos.numpy()[cube, 1]) - half) < 1e-3
 
 
-def test_a_real_step_still_stops_a_sliding_box():
+def test_a_real_step_still_stops_a_sliding_box(device):
     """The far slab 5 cm higher: its side face is not covered (the near slab's face is smaller; the
     near slab's face is, by it), so a cube sliding into it at 3 m/s stops against it (it would
     otherwise slide 2.3 m)."""
@@ -88,9 +88,9 @@ def test_a_real_step_still_stops_a_sliding_box():
     b.add_box((2.0, 0.5, 5.0), 1.0, position=(-2.0, -0.5, 0.0), static=True)
     b.add_box((2.0, 0.525, 5.0), 1.0, position=(2.0, -0.475, 0.0), static=True)
     cube = b.add_box((0.25, 0.25, 0.25), 1.0, position=(-1.0, 0.25, 0.0), velocity=(3.0, 0.0, 0.0))
-    model = b.finalize("cpu")
+    model = b.finalize(device)
     assert model.host["body_covered_faces"][0] == face_bit(0, 1.0) and model.host["body_covered_faces"][1] == 0
-    sim = Simulator(model, SimConfig(sleep=False))
+    sim = Simulator(model, SimConfig(sleep=False, device=device))
     sim.step(90)
     assert float(sim.state.body_pos.numpy()[cube, 0]) < -0.25 + 1e-3
 
