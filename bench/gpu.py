@@ -100,6 +100,7 @@ def rain_model(count: int, shape: str, device, spacing: float = 1.2, radius: flo
         "body_shape": np.where(sphere, SHAPE_SPHERE, SHAPE_BOX).astype(np.int32),
         "body_size": size.astype(np.float32),
         "body_bound_radius": np.where(sphere, radius, float(np.linalg.norm((half,) * 3))).astype(np.float32),
+        "body_covered_faces": np.zeros(count, np.int32),  # every body dynamic: no static face is covered
         "body_inv_mass": np.ones(count, np.float32),
         "body_inertia": inertia.astype(np.float32),
         "body_inv_inertia": (1.0 / inertia).astype(np.float32),

@@ -61,6 +61,8 @@ class Model:
         self.body_shape = arr("body_shape", wp.int32)
         self.body_size = arr("body_size", wp.vec3)
         self.body_bound_radius = arr("body_bound_radius", float)
+        # host arrays written before the masks existed (saved models, hand-built scenes) cover nothing
+        host.setdefault("body_covered_faces", np.zeros(len(host["body_shape"]), np.int32))
         self.body_covered_faces = arr("body_covered_faces", wp.int32)
         self.body_inv_mass = arr("body_inv_mass", float)
         self.body_inertia = arr("body_inertia", wp.vec3)
