@@ -18,6 +18,12 @@ class NonFiniteStateError(RuntimeError):
         self.step = step
 
 
+# The fields SimConfig hands to the solver under the same names (SimConfig.solver_settings).
+SOLVER_FIELDS = ("integrator", "rotation", "iterations", "relax_iterations", "relax_passes", "contact_hertz",
+                 "damping_ratio", "max_push_velocity", "restitution_threshold", "convergence_tolerance",
+                 "convergence_gravity_share", "solver", "overflow_pairs")
+
+
 @dataclass
 class SimConfig:
     """Simulation settings, the ``[sim]`` table of a scene file (units SI)."""
@@ -68,18 +74,5 @@ class SimConfig:
         check_fields(self, SIM_SCHEMA, "SimConfig")
 
     def solver_settings(self) -> SolverSettings:
-        return SolverSettings(
-            integrator=self.integrator,
-            rotation=self.rotation,
-            iterations=self.iterations,
-            relax_iterations=self.relax_iterations,
-            relax_passes=self.relax_passes,
-            contact_hertz=self.contact_hertz,
-            damping_ratio=self.damping_ratio,
-            max_push_velocity=self.max_push_velocity,
-            restitution_threshold=self.restitution_threshold,
-            convergence_tolerance=self.convergence_tolerance,
-            convergence_gravity_share=self.convergence_gravity_share,
-            solver=self.solver,
-            overflow_pairs=self.overflow_pairs,
-        )
+        """The solver's share of these settings (the substep plan adds the rest, Simulator)."""
+        return SolverSettings(**{name: getattr(self, name) for name in SOLVER_FIELDS})
