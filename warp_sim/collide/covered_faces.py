@@ -32,12 +32,20 @@ def face_bit(axis: int, side: float) -> int:
 
 
 def covered_faces(shape: np.ndarray, half: np.ndarray, position: np.ndarray, rot: np.ndarray,
-                  static: np.ndarray, box_shape: int) -> np.ndarray:
+                  static: np.ndarray, box_shape: int, ground_plane=None) -> np.ndarray:
     """The covered-face mask of every body (0 for spheres and dynamic bodies).  Candidates are
-    found by sorting the static boxes along x, so a floor of N tiles costs about N^1.5 tests."""
+    found by sorting the static boxes along x, so a floor of N tiles costs about N^1.5 tests.
+    ``ground_plane`` (a PlaneTerrain, or None): a face lying wholly in its solid half-space, to
+    within COVER_TOLERANCE, is covered by the ground, like a box's sides where it is set flush
+    into the plane (a ball rolling from the plane onto such a box hopped 19 mm at 2 m/s).  On the
+    Fourier terrain no face counts as covered by the ground: between sample points the surface
+    could rise above it."""
     n = len(shape)
     mask = np.zeros(n, np.int32)
     boxes = np.flatnonzero((shape == box_shape) & static)
+    if ground_plane is not None:
+        for b in boxes:
+            mask[b] |= _under_ground(half[b], position[b], rot[b], ground_plane)
     if len(boxes) < 2:
         return mask
     centre = position[boxes].astype(np.float64)
@@ -52,8 +60,20 @@ def covered_faces(shape: np.ndarray, half: np.ndarray, position: np.ndarray, rot
         near = near[(near != a) & (np.linalg.norm(centre[near] - centre[a], axis=1)
                                    <= radius[near] + radius[a] + COVER_TOLERANCE)]
         if len(near):
-            mask[boxes[a]] = _covered_by(boxes[a], boxes[near], half, position, rot)
+            mask[boxes[a]] |= _covered_by(boxes[a], boxes[near], half, position, rot)
     return mask
+
+
+def _under_ground(half, position, rot, plane) -> int:
+    """Which faces of one box lie wholly in the plane's solid half-space n . p <= offset."""
+    bits = 0
+    for axis in range(3):
+        for side in (1.0, -1.0):
+            centre, _, (u, v), (hu, hv) = _face(half, position, rot, axis, side)
+            corners = np.array([centre + su * hu * u + sv * hv * v for su in (-1, 1) for sv in (-1, 1)])
+            if np.all(plane.signed_distance(corners) <= COVER_TOLERANCE):
+                bits |= face_bit(axis, side)
+    return bits
 
 
 def _face(half: np.ndarray, position: np.ndarray, rot: np.ndarray, axis: int, side: float):
