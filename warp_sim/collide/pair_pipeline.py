@@ -102,8 +102,8 @@ class PairContactPipeline:
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
         launch(collide_pairs, self.live_dim, key=self, inputs=[
-            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, margin, state.body_pos, state.body_rot,
-            self.body_reach,
+            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, margin, state.body_pos,
+            state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
             contacts.pair_depth, contacts.pair_feature], device=self.device)
