@@ -168,16 +168,14 @@ def test_refreshed_pair_reads_as_the_fresh_contact_at_the_current_pose(half_a, h
 
 
 def test_pairs_turned_less_than_the_tolerance_are_left_alone(device):
-    """Below the tolerance (turn times bounding radius, summed, plus the centres' relative motion
-    where one is static) nothing is written, bit for bit; above it the pair is refreshed."""
+    """Below the tolerance (turn times bounding radius, summed) nothing is written, bit for bit;
+    above it the pair is refreshed."""
     rng = np.random.default_rng(5)
     case = random_case(rng, (0.3, 0.1, 0.3), (0.3, 0.1, 0.3), 0.02)
     swing = 0.0
     for k in range(2):
         r = case["rot"][k] @ case["ref_rot"][k].T
         swing += np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1)) * np.linalg.norm(case["half"][k])
-    if min(case["inv_mass"]) == 0.0:  # sliding counts only along a static body
-        swing += np.linalg.norm((case["pos"][0] - case["ref_pos"][0]) - (case["pos"][1] - case["ref_pos"][1]))
     before, after, _ = refresh(case, tolerance=1.01 * swing, device=device)
     assert after["refreshed"] == 0
     for key in ("count", "normal", "point", "depth", "feature", "impulse"):
@@ -186,16 +184,17 @@ def test_pairs_turned_less_than_the_tolerance_are_left_alone(device):
     assert after["refreshed"] == 1
 
 
+@pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: pairs found again mid-step): the "
+                   "step's manifold holds a ball rolling off a static box's edge at the box's height for the rest "
+                   "of the step")
 @pytest.mark.parametrize("speed, radius", [(2.0, 0.1), (3.0, 0.25), (2.5, 0.2), (1.5, 0.15)])
 def test_ball_rolling_off_a_table_leaves_it_at_the_edge(speed, radius, device):
     """A ball rolling at v with v^2 > g r cannot follow the edge round: it leaves the table as its
-    centre passes the edge and falls on the parabola from there.  With the step's manifold alone
-    the table's face held it at the table's height for the rest of the step (a whole step at
-    2 m/s, 59 mm off the parabola).  Found again once the pair has slid turn_refresh, it leaves
-    within a substep of the edge: off the parabola by at most g tau h (falling one substep late,
-    tau after the edge) plus g h^2 for the substep's own kick.  Not yet within it (README): a small
-    ball crossing a large share of its radius a substep (r 0.1 m at 5 m/s: 10 mm off one step
-    after the edge), which the edge's linearised contact holds up for part of the step."""
+    centre passes the edge and falls on the parabola from there, within a substep of it with
+    contacts found every substep: off the parabola by at most g tau h (falling one substep late,
+    tau after the edge) plus g h^2 for the substep's own kick.  With the step's manifold the
+    table's face holds it at the table's height for the rest of the step (a whole step at 2 m/s,
+    59 mm off the parabola)."""
     assert speed ** 2 > G * radius
     b = ModelBuilder(Material(friction=0.5))
     b.add_box((1.0, 0.5, 1.0), 1.0, position=(0.0, 0.5, 0.0), static=True)

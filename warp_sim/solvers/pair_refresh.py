@@ -1,4 +1,4 @@
-"""Pairs found again mid-step where their bodies have turned or slid (``SimConfig.turn_refresh``).
+"""Pairs found again mid-step where their bodies have turned (``SimConfig.turn_refresh``).
 
 Contacts found once per step serve every substep as a linearisation about the step's reference
 pose (pair_geometry.py): each point is a material point of both bodies, the normal is fixed and
@@ -11,12 +11,10 @@ that is most of the depth the once-per-step contacts leave: contacts found every
 cut the deepest pair in a 10-plate column drop from 1.4-1.8 cm to 0.9-1.3 cm, and at 8 substeps
 from 1.3-2.8 cm to 0.2-0.5 cm, while more substeps or sweeps with the step's manifold did not help.
 
-So before each later substep, a pair whose bodies have turned or slid by more than the tolerance
-since the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can
-have swung, plus, along a static body, how far the two centres have moved relative to each
-other: a point slid along a face stays right, but not once it passes the face's edge, where a
-ball rolling off a table was held at the table's height for a whole step) is collided again at the current pose, and only
-that pair: in a settled pile nothing turns or slides and nothing is found again.  Two spheres are never refreshed (their normal and gap follow
+So before each later substep, a pair whose bodies have turned by more than the tolerance since
+the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can have
+swung) is collided again at the current pose, and only that pair: in a settled pile nothing
+turns and nothing is found again.  Two spheres are never refreshed (their normal and gap follow
 the centres, exactly), and a sphere's own turn counts for nothing; a box turning under or beside
 a sphere does count: its face tilts under the sphere's fixed normal and the point slides off
 the face the pass found (in `mixed_rain.toml`, boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every
@@ -115,14 +113,8 @@ def refresh_turned_pairs(
     sphere_j = body_shape[j] == SHAPE_SPHERE
     if sphere_i and sphere_j:
         return
-    # a sphere's own turn moves none of its surface; a body's motion along a static one slides the
-    # contact along the features the pass found, exact on a face but not past its edge (a ball
-    # rolling off a table at 2 m/s was held at the table's height for a whole step after its
-    # centre had passed the edge, landing 3 cm long).  Between two dynamic bodies it is not
-    # counted: refreshing sliding pairs in the 10k rain took its landing peak from 3.2 to 5.0 mm
+    # a sphere's own turn moves none of its surface
     swing = float(0.0)
-    if body_inv_mass[i] == 0.0 or body_inv_mass[j] == 0.0:
-        swing = wp.length((body_pos[i] - solver_ref_pos[i]) - (body_pos[j] - solver_ref_pos[j]))
     if not sphere_i:
         swing += turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
     if not sphere_j:
