@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import Model
+from .collide.covered_faces import covered_faces
 from .terrain import NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
 from .validation import (BODY_ORDERS, BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, Choice, ValidationError, check,
@@ -368,7 +369,6 @@ class ModelBuilder:
     def host_arrays(self, per_edge: int, order: np.ndarray | None = None) -> dict:
         """The Model's host arrays (float32 / int32), computed column-wise; with ``order`` (a
         permutation, body_order.py) internal body i is added body ``order[i]``."""
-        from .collide.covered_faces import covered_faces
         from .limits import check_terrain_resolution
 
         c = self.columns()

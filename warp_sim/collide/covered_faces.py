@@ -69,9 +69,8 @@ def _under_ground(half, position, rot, plane) -> int:
     bits = 0
     for axis in range(3):
         for side in (1.0, -1.0):
-            centre, _, (u, v), (hu, hv) = _face(half, position, rot, axis, side)
-            corners = np.array([centre + su * hu * u + sv * hv * v for su in (-1, 1) for sv in (-1, 1)])
-            if np.all(plane.signed_distance(corners) <= COVER_TOLERANCE):
+            face = _face(half, position, rot, axis, side)
+            if np.all(plane.signed_distance(_corners(*face)) <= COVER_TOLERANCE):
                 bits |= face_bit(axis, side)
     return bits
 
@@ -85,13 +84,20 @@ def _face(half: np.ndarray, position: np.ndarray, rot: np.ndarray, axis: int, si
     return position.astype(np.float64) + h[axis] * normal, normal, (r[:, u], r[:, v]), (h[u], h[v])
 
 
+def _corners(centre, normal, axes, halves) -> np.ndarray:
+    """The four corners of a face given as _face returns it."""
+    (u, v), (hu, hv) = axes, halves
+    return np.array([centre + su * hu * u + sv * hv * v for su in (-1, 1) for sv in (-1, 1)])
+
+
 def _covered_by(b: int, neighbours: np.ndarray, half, position, rot) -> int:
     """Which faces of box b a face of one of ``neighbours`` covers (see the module docstring)."""
     bits = 0
     for axis in range(3):
         for side in (1.0, -1.0):
-            centre, normal, (u, v), (hu, hv) = _face(half[b], position[b], rot[b], axis, side)
-            corners = [centre + su * hu * u + sv * hv * v for su in (-1, 1) for sv in (-1, 1)]
+            face = _face(half[b], position[b], rot[b], axis, side)
+            centre, normal = face[0], face[1]
+            corners = _corners(*face)
             for a in neighbours:
                 if _one_face_covers(a, centre, normal, corners, half, position, rot):
                     bits |= face_bit(axis, side)

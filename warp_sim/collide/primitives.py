@@ -82,13 +82,12 @@ def collide_sphere_box(sphere_pos: wp.vec3, radius: float, box_pos: wp.vec3, box
                       wp.clamp(local[2], -box_half[2], box_half[2]))
     region = wp.vec3(slab_side(local[0], box_half[0]), slab_side(local[1], box_half[1]),
                      slab_side(local[2], box_half[2]))
-    if box_covered != 0:
+    if box_covered != 0 and wp.length(region) > 0.0:  # outside
         for k in range(3):
             if region[k] != 0.0 and face_covered(box_covered, k, region[k]):
                 closest[k] = local[k]
                 region[k] = 0.0
-        if region[0] == 0.0 and region[1] == 0.0 and region[2] == 0.0 and (
-                wp.abs(local[0]) > box_half[0] or wp.abs(local[1]) > box_half[1] or wp.abs(local[2]) > box_half[2]):
+        if wp.length(region) == 0.0:
             return manifold_empty()
     offset = local - closest
     distance = wp.length(offset)

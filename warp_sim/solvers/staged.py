@@ -193,9 +193,10 @@ def sweep_body_terrain(
     # left 22 % of it (each point can give back only its own share of the impulse; a cube started
     # 2 cm deep without gravity then drifted off at 0.077 m/s), so a relax walks the body's own
     # rows again until a pass moves no point by more than the convergence tolerance.
-    passes = wp.where(use_bias > 0 or count == 1, 1, settings.relax_passes)  # one point gives all back in one
+    passes = wp.where(count == 1, 1, settings.relax_passes)  # one point gives all back in one
     if use_bias > 0 and count > 1:
-        # rows that hold no impulse yet start cold: swept until converged (soft_step.solve_sweeps)
+        # a solve sweep takes one pass, but rows that hold no impulse yet start cold and are swept
+        # until converged (soft_step.solve_sweeps)
         holding = int(0)
         for k in range(count):
             if slots.terrain_contact_normal_impulse[solver.terrain_row_slot[start + k]] > 0.0:
