@@ -58,7 +58,8 @@ class SimConfig:
     contact_max: int = 0
     contact_update: str = "step"  # find body-body scenes' contacts once per step, or every substep
     recollide_outrun: bool = True  # "step" updates: find the pairs again mid-step if a body outruns its reach
-    # [m] "step" updates: a pair whose bodies turned this far since the pass is found again; 0: never
+    # [m] "step" updates: a pair whose bodies turned (or slid along a static one) this far since the
+    # pass is found again; 0: never
     turn_refresh: float = 0.005
     pair_schedule: str = "auto"  # body-body sweeps by slab (CPU) or by colour (CUDA); solvers/domains.py
     overflow_pairs: str = "auto"  # pairs past the colours: "split" (CUDA), "in_order" (CPU); solvers/pair_overflow.py

@@ -1,4 +1,4 @@
-"""Pairs found again mid-step where their bodies have turned (``SimConfig.turn_refresh``).
+"""Pairs found again mid-step where their bodies have turned or slid (``SimConfig.turn_refresh``).
 
 Contacts found once per step serve every substep as a linearisation about the step's reference
 pose (pair_geometry.py): each point is a material point of both bodies, the normal is fixed and
@@ -11,15 +11,26 @@ that is most of the depth the once-per-step contacts leave: contacts found every
 cut the deepest pair in a 10-plate column drop from 1.4-1.8 cm to 0.9-1.3 cm, and at 8 substeps
 from 1.3-2.8 cm to 0.2-0.5 cm, while more substeps or sweeps with the step's manifold did not help.
 
-So before each later substep, a pair whose bodies have turned by more than the tolerance since
-the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can have
-swung) is collided again at the current pose, and only that pair: in a settled pile nothing
-turns and nothing is found again.  Two spheres are never refreshed (their normal and gap follow
-the centres, exactly), and a sphere's own turn counts for nothing; a box turning under or beside
-a sphere does count: its face tilts under the sphere's fixed normal and the point slides off
-the face the pass found (in `mixed_rain.toml`, boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every
-pair deeper than 2 cm was a sphere-box pair until these were refreshed too: 75 mm -> 20 mm).
+So before each later substep, a pair whose bodies have turned or slid by more than the tolerance
+since the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can have
+swung, plus, along a static body, how far the two centres have moved relative to each other: a
+point slid along a face stays right, but not once it passes the face's edge, where a ball rolling
+off a table was held at the table's height for a whole step) is collided again at the current pose,
+and only that pair: in a settled pile nothing turns or slides and nothing is found again. Two
+spheres are never refreshed (their normal and gap follow the centres, exactly), and a sphere's own
+turn counts for nothing; a box turning under or beside a sphere does count: its face tilts under
+the sphere's fixed normal and the point slides off the face the pass found (in `mixed_rain.toml`,
+boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every pair deeper than 2 cm was a sphere-box pair until
+these were refreshed too: 75 mm -> 20 mm).
 A sphere's pair keeps its second slot's rolling-resistance impulse through the refresh.
+
+The drift that places a refreshed point is the one the solver reads (soft_step.drift_rotation):
+a box's points turn with it, a sphere's anchor is its support point, which the ball's own spin
+does not move.  Turning it with the ball had lifted a ball rolling on a refreshed pair by
+r (1 - cos theta), theta its spin since the pass: 17 mm at 8 m/s on a plank turning 0.5 rad/s,
+12 to 45 mm for fast balls leaving a table's edge.  In the mixed rain that lift had also acted as
+a spurious margin between spinning balls and boxes: without it the deepest pair while landing is
+what contacts found every substep give (5 to 8 mm against 4.3 to 4.8 mm).
 
 The new manifold is written in the reference representation the solver reads, so nothing else
 changes: for a point p found now with depth d and normal n, with the bodies displaced by dp_i,
@@ -40,6 +51,7 @@ from ..launch import launch
 from ..collide.narrow_phase import POINTS, match_old_points
 from ..collide.primitives import SHAPE_SPHERE, collide_pair, mat43
 from .pair_geometry import anchor_weight
+from .soft_step import drift_rotation
 
 wp.set_module_options({"enable_backward": False})
 
@@ -113,8 +125,15 @@ def refresh_turned_pairs(
     sphere_j = body_shape[j] == SHAPE_SPHERE
     if sphere_i and sphere_j:
         return
-    # a sphere's own turn moves none of its surface
+    # a sphere's own turn moves none of its surface; a body's motion along a static one slides the
+    # contact along the features the pass found, exact on a face but not past its edge (a ball
+    # rolling off a table at 2 m/s was held at the table's height for a whole step after its
+    # centre had passed the edge, 40 mm above the parabola).  Between two dynamic bodies it is not
+    # counted: refreshing sliding pairs in the rains gained no depth and found pairs again in
+    # every substep of a landing pile
     swing = float(0.0)
+    if body_inv_mass[i] == 0.0 or body_inv_mass[j] == 0.0:
+        swing = wp.length((body_pos[i] - solver_ref_pos[i]) - (body_pos[j] - solver_ref_pos[j]))
     if not sphere_i:
         swing += turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
     if not sphere_j:
@@ -129,8 +148,10 @@ def refresh_turned_pairs(
     xj = solver_ref_pos[j]
     dpi = body_pos[i] - xi
     dpj = body_pos[j] - xj
-    turn_i = body_rot[i] * wp.transpose(solver_ref_rot[i]) - wp.identity(3, dtype=float)
-    turn_j = body_rot[j] * wp.transpose(solver_ref_rot[j]) - wp.identity(3, dtype=float)
+    # as the solver reads them (soft_step.drift_rotation): a sphere's anchor is its support point,
+    # which its own turn does not move
+    turn_i = drift_rotation(body_shape[i], body_rot[i], solver_ref_rot[i])
+    turn_j = drift_rotation(body_shape[j], body_rot[j], solver_ref_rot[j])
     w = anchor_weight(wp.where(sphere_i, 1.0, 0.0), wp.where(sphere_j, 1.0, 0.0), body_inv_mass[i], body_inv_mass[j])
     point = mat43()
     depth = wp.vec4(0.0)
