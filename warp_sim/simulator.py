@@ -139,7 +139,6 @@ class Simulator:
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
         self.outrun = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.outrun_passes = wp.zeros(1, dtype=wp.int32, device=self.device)  # mid-step passes run, ever
-        self.refreshed_pairs = wp.zeros(1, dtype=wp.int32, device=self.device)  # turned pairs found again, ever
         self._saved = None  # the state at the start of a step() call, when its steps are captured
         self._warm = False
         self.body_bad_step = wp.full(model.body_count, -1, dtype=wp.int32, device=self.device)
@@ -242,7 +241,7 @@ class Simulator:
                 self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin, True)
             if k > 0 and self.config.turn_refresh > 0.0:
                 self._stage("pairs", refresh_turned, self.physics_model, self.states[0], self.solver, self.pairs,
-                            self.contacts, margin, self.config.turn_refresh, self.refreshed_pairs)
+                            self.contacts, margin, self.config.turn_refresh)
             after_impacts = None
             if self.config.recollide_outrun and self.physics_model.has_restitution:
                 after_impacts = functools.partial(self._recollide_outrun, dt - k * h, margin, True)
@@ -491,6 +490,15 @@ class Simulator:
     def wake_all(self):
         if self.sleep is not None:
             self.sleep.wake_all()
+
+    def refreshed_pair_count(self) -> int:
+        """Pairs found again mid-step (solvers/pair_refresh.py) since the last pass that found the
+        pairs: in a step without a mid-step pass, that step's refreshes, counted over its later
+        substeps (a pair refreshed before two substeps counts twice)."""
+        if self.pairs is None:
+            return 0
+        live = min(int(self.contacts.pair_count.numpy()[0]), self.contacts.pair_max)
+        return int(self.contacts.pair_refresh_count.numpy()[:live].sum())
 
     def awake_count(self) -> int:
         """Dynamic bodies not asleep."""

@@ -46,10 +46,12 @@ def collide_pairs(
     pair_point: wp.array(dtype=wp.vec3),
     pair_depth: wp.array(dtype=float),
     pair_feature: wp.array(dtype=wp.int32),
+    pair_refresh_count: wp.array(dtype=wp.int32),
 ):
     p = wp.tid() + tid_offset
     if p >= broad_pair_count[0]:
         return
+    pair_refresh_count[p] = 0
     ij = broad_pair_body[p]
     i = ij[0]
     j = ij[1]

@@ -106,7 +106,7 @@ class PairContactPipeline:
             state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
-            contacts.pair_depth, contacts.pair_feature], device=self.device)
+            contacts.pair_depth, contacts.pair_feature, contacts.pair_refresh_count], device=self.device)
         launch(carry_pair_impulses, self.live_dim, key=self, inputs=[
             contacts.prev_pair_count, contacts.prev_pair_body, contacts.prev_pair_point_count,
             contacts.prev_pair_feature, contacts.prev_pair_normal, contacts.prev_pair_point,
@@ -159,7 +159,7 @@ class PairContactPipeline:
             m.body_bound_radius,
             self.broad.pair_body, self.broad.pair_count,
             probe.pair_body, probe.pair_point_count, probe.pair_normal, probe.pair_point,
-            probe.pair_depth, probe.pair_feature], self.device)
+            probe.pair_depth, probe.pair_feature, probe.pair_refresh_count], self.device)
         count = min(int(self.broad.pair_count.numpy()[0]), self.capacity)
         if count == 0:
             return 0.0

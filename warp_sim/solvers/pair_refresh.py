@@ -13,24 +13,24 @@ from 1.3-2.8 cm to 0.2-0.5 cm, while more substeps or sweeps with the step's man
 
 So before each later substep, a pair whose bodies have turned or slid by more than the tolerance
 since the pass (theta_i r_i + theta_j r_j, r the bounding radius: how far a surface point can have
-swung, plus, along a static body, how far the two centres have moved relative to each other: a
-point slid along a face stays right, but not once it passes the face's edge, where a ball rolling
-off a table was held at the table's height for a whole step) is collided again at the current pose,
-and only that pair: in a settled pile nothing turns or slides and nothing is found again. Two
-spheres are never refreshed (their normal and gap follow the centres, exactly), and a sphere's own
-turn counts for nothing; a box turning under or beside a sphere does count: its face tilts under
-the sphere's fixed normal and the point slides off the face the pass found (in `mixed_rain.toml`,
-boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every pair deeper than 2 cm was a sphere-box pair until
-these were refreshed too: 75 mm -> 20 mm).
+swung, plus, for a sphere or along a static body, how far the two centres have moved relative to
+each other: a point slid along a face stays right, but not once it passes the face's edge, where a
+ball rolling off a table was held at the table's height for a whole step) is collided again at the
+current pose, and only that pair: in a settled pile nothing turns or slides and nothing is found
+again. Two spheres are never refreshed (their normal and gap follow the centres, exactly), and a
+sphere's own turn counts for nothing; a box turning under or beside a sphere does count: its face
+tilts under the sphere's fixed normal and the point slides off the face the pass found (in
+`mixed_rain.toml`, boxes 0.5 x 0.3 x 0.2 m and balls r 0.2, every pair deeper than 2 cm was a
+sphere-box pair until these were refreshed too: 75 mm -> 20 mm).
 A sphere's pair keeps its second slot's rolling-resistance impulse through the refresh.
 
-The drift that places a refreshed point is the one the solver reads (soft_step.drift_rotation):
-a box's points turn with it, a sphere's anchor is its support point, which the ball's own spin
-does not move.  Turning it with the ball had lifted a ball rolling on a refreshed pair by
-r (1 - cos theta), theta its spin since the pass: 17 mm at 8 m/s on a plank turning 0.5 rad/s,
-12 to 45 mm for fast balls leaving a table's edge.  In the mixed rain that lift had also acted as
-a spurious margin between spinning balls and boxes: without it the deepest pair while landing is
-what contacts found every substep give (5 to 8 mm against 4.3 to 4.8 mm).
+The drift that places a refreshed point is the one the solver reads (soft_step.drift_rotation): a
+box's points turn with it, a sphere's anchor is its support point, which the ball's own spin does
+not move. Turning it with the ball had lifted a ball rolling on a refreshed pair by r (1 - cos
+theta), theta its spin since the pass: 17 mm at 8 m/s on a plank turning 0.5 rad/s, 12 to 45 mm for
+fast balls leaving a table's edge. In the mixed rain that lift had also acted as a spurious margin
+between spinning balls and boxes: without it the deepest pair while landing is about what contacts
+found every substep give (7 to 8 mm against 4.3 to 4.8 mm; every substep 5.6 to 8.4).
 
 The new manifold is written in the reference representation the solver reads, so nothing else
 changes: for a point p found now with depth d and normal n, with the bodies displaced by dp_i,
@@ -108,8 +108,7 @@ def refresh_turned_pairs(
     pair_feature: wp.array(dtype=wp.int32),
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
-    # Out
-    refreshed_pairs: wp.array(dtype=wp.int32),
+    pair_refresh_count: wp.array(dtype=wp.int32),
 ):
     p = wp.tid() + tid_offset
     if p >= pair_count[0]:
@@ -125,14 +124,14 @@ def refresh_turned_pairs(
     sphere_j = body_shape[j] == SHAPE_SPHERE
     if sphere_i and sphere_j:
         return
-    # a sphere's own turn moves none of its surface; a body's motion along a static one slides the
+    # a sphere's own turn moves none of its surface; the two centres' relative slide moves the
     # contact along the features the pass found, exact on a face but not past its edge (a ball
     # rolling off a table at 2 m/s was held at the table's height for a whole step after its
-    # centre had passed the edge, 40 mm above the parabola).  Between two dynamic bodies it is not
-    # counted: refreshing sliding pairs in the rains gained no depth and found pairs again in
-    # every substep of a landing pile
+    # centre had passed the edge, 40 mm above the parabola).  It counts for a sphere on anything
+    # and a box on a static body, not between two dynamic boxes: counted there it gained no depth
+    # in the rains and cost some in the plate rain (a box leaving an edge tips over it, slowly)
     swing = float(0.0)
-    if body_inv_mass[i] == 0.0 or body_inv_mass[j] == 0.0:
+    if body_inv_mass[i] == 0.0 or body_inv_mass[j] == 0.0 or sphere_i or sphere_j:
         swing = wp.length((body_pos[i] - solver_ref_pos[i]) - (body_pos[j] - solver_ref_pos[j]))
     if not sphere_i:
         swing += turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
@@ -183,17 +182,18 @@ def refresh_turned_pairs(
         pair_feature[slot] = m.feature[k]
         pair_normal_impulse[slot] = normal_impulse[k]
         pair_tangent_impulse[slot] = wp.vec3(tangent_impulse[k, 0], tangent_impulse[k, 1], tangent_impulse[k, 2])
-    wp.atomic_add(refreshed_pairs, 0, 1)
+    pair_refresh_count[p] = pair_refresh_count[p] + 1
 
 
-def refresh_turned(model, state, solver, pairs, contacts, margin: float, tolerance: float, refreshed_pairs):
+def refresh_turned(model, state, solver, pairs, contacts, margin: float, tolerance: float):
     """Before a later substep of a once-per-step scene: every pair whose bodies have turned by
     more than ``tolerance`` since the step's pass, collided again at ``state``'s pose.  The pair
-    list, colours and slabs do not change; ``refreshed_pairs`` counts the refreshes."""
+    list, colours and slabs do not change; ``contacts.pair_refresh_count`` counts each pair's
+    refreshes since the pass that found it."""
     c = contacts
     launch(refresh_turned_pairs, pairs.live_dim, key=pairs, inputs=[
         model.body_shape, model.body_size, model.body_bound_radius, model.body_covered_faces, model.body_inv_mass, margin,
         tolerance,
         state.body_pos, state.body_rot, solver.solver_ref_pos, solver.solver_ref_rot, pairs.body_reach,
         c.pair_count, c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth, c.pair_feature,
-        c.pair_normal_impulse, c.pair_tangent_impulse, refreshed_pairs], device=state.body_pos.device)
+        c.pair_normal_impulse, c.pair_tangent_impulse, c.pair_refresh_count], device=state.body_pos.device)
