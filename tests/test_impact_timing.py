@@ -79,3 +79,79 @@ def test_tumbling_box_bouncing_elastically_keeps_its_kinetic_energy(seed, device
     sim.step(40)
     assert sim.state.body_vel.numpy()[0, 1] > 0.0  # it did hit the plane
     assert sim.kinetic_energy() == pytest.approx(before, rel=1e-3)
+
+
+def yaw_pitch(rng, pitch: float):
+    """A random turn about the vertical, then ``pitch`` about the body's x axis (quaternion x y z w)."""
+    yaw = rng.uniform(0.0, 2.0 * np.pi)
+    qy = np.array([0.0, np.sin(yaw / 2), 0.0, np.cos(yaw / 2)])
+    qx = np.array([np.sin(pitch / 2), 0.0, 0.0, np.cos(pitch / 2)])
+    x1, y1, z1, w1 = qy
+    x2, y2, z2, w2 = qx
+    return (w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2, w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2, w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2)
+
+
+def elastic_floor(floor: str) -> ModelBuilder:
+    """e = 1, mu = 0, the floor's top at y = 0: the plane, or a static box."""
+    b = ModelBuilder(Material(restitution=1.0, friction=0.0))
+    if floor == "plane":
+        b.set_terrain(PlaneTerrain())
+    else:
+        b.add_box((3.0, 0.25, 3.0), 1.0, position=(0.0, -0.25, 0.0), static=True)
+    return b
+
+
+@pytest.mark.parametrize("floor", ["plane", "static box"])
+@pytest.mark.parametrize("seed", [3, 7, 12, 25, 1002, 1013, 1025])
+def test_tumbling_box_struck_corner_after_corner_keeps_its_energy(floor, seed, device):
+    """A tumbling box (2 to 6 m/s, up to 20 rad/s) whose first corner's bounce swings the next one
+    down within the same substep: that second contact is an impact of its own (impact.py: rounds,
+    and the shift of the first impact counted as motion).  Met by the soft solve's speculative row
+    or the relax instead it was plastic: seeds 1025, 1002, 1013 lost 31, 14 and 6 % of their
+    energy on the plane, 1013 also on the static box.  e = 1, mu = 0, no gravity: the energy is kept
+    to the compression's convergence (updates under 1e-5 m/s, a remaining error of that over one
+    minus the sweeps' rate) and the free flight's 1e-5: 1e-3 of it."""
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    speed = rng.uniform(2.0, 6.0)
+    direction = np.array([rng.uniform(-0.3, 0.3), -1.0, rng.uniform(-0.3, 0.3)])
+    spin = rng.normal(size=3)
+    spin *= rng.uniform(0.0, 20.0) / np.linalg.norm(spin)
+    b = elastic_floor(floor)
+    b.add_box((0.2, 0.14, 0.26), 1.0, position=(0.0, 0.6, 0.0), orientation=tuple(q),
+              velocity=tuple(speed * direction / np.linalg.norm(direction)), angular_velocity=tuple(spin))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, device=device))
+    before = sim.kinetic_energy()
+    sim.step(30)
+    assert sim.state.body_vel.numpy()[-1, 1] > 0.0  # it did hit the floor
+    assert sim.kinetic_energy() == pytest.approx(before, rel=1e-3)
+
+
+LATE_TURN = pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: impacts timed to "
+                              "the substep): an impact late in a substep moves the centre from t* but turns the "
+                              "body from the substep's start; this plate's far corner swung 19 mm into the plane "
+                              "and the push-out gave it 0.3 % energy (1 of 60 layouts tried)")
+
+
+@pytest.mark.parametrize("floor, seed", [pytest.param("plane", 0, marks=LATE_TURN)]
+                         + [(floor, seed) for floor in ("plane", "static box") for seed in range(1, 6)])
+def test_thin_plate_landing_edge_first_keeps_its_energy(floor, seed, device):
+    """A plate (half thickness 5 to 20 mm) landing edge first at 5 to 20 m/s, e = 1, mu = 0, no
+    gravity.  Its edge gives contact points in pairs 2t apart, nearly one row twice, on which the
+    compression's Gauss-Seidel converges slowly: at a fixed 16 sweeps a 1 cm plate at 10 m/s left
+    with 1 to 2 % more energy than it came with.  The bound is the previous test's."""
+    rng = np.random.default_rng(seed)
+    thickness = rng.uniform(0.005, 0.02)
+    speed = rng.uniform(5.0, 20.0)
+    b = elastic_floor(floor)
+    b.add_box((0.3, thickness, 0.2), 1.0, position=(0.0, 0.5, 0.0),
+              orientation=yaw_pitch(rng, 0.5 * np.pi + rng.uniform(-0.3, 0.3)),
+              velocity=(rng.uniform(-1.0, 1.0), -speed, rng.uniform(-1.0, 1.0)),
+              angular_velocity=tuple(rng.uniform(-2.0, 2.0, 3)))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, device=device))
+    before = sim.kinetic_energy()
+    sim.step(int(0.5 / speed * 60) + 6)
+    assert sim.state.body_vel.numpy()[-1, 1] > 0.0
+    assert sim.kinetic_energy() == pytest.approx(before, rel=1e-3)
