@@ -118,3 +118,22 @@ def test_boxes_closer_than_the_margin_get_their_true_distance_as_the_nearest_gap
         assert r["count"] >= 1, f"no point for boxes {gap:.4f} m apart"
         nearest = -r["depth"].max()
         assert gap - 2e-5 <= nearest <= gap + 2e-5
+
+
+@pytest.mark.parametrize("step_depth", [0.5, 1.0, 1.5, 2.0, 3.0, 4.0])
+@pytest.mark.parametrize("gap", [0.0125, 0.02, 0.037])
+def test_a_face_approaching_a_face_keeps_the_clip_corners(step_depth, gap, device):
+    """A cube's face approaching a step's side face, their bottoms flush (a cube sliding into a
+    step): the manifold is the four corners of the overlap, 2 at the step's top edge and 2 at the
+    bottom, in either body order.  The nearest pair of features is as deep as those to rounding;
+    it took a clip point's slot for some step sizes (the step's top corner on one side replaced by
+    a copy of a bottom corner), and the cube tripped on one top corner."""
+    from test_primitives import box
+    a, s = 0.4, 0.15
+    cube = box((0.3 - a - gap, a, 0.0), (a, a, a))
+    step = box((0.3 + step_depth, s / 2, 0.0), (step_depth, s / 2, 2.0))
+    for pair in ((step, cube), (cube, step)):
+        r = collide("box_box", [pair], MARGIN, device)[0]
+        points = np.round(np.asarray(r["point"])[:, 1:], 4)
+        assert sorted(map(tuple, points)) == [(0.0, -a), (0.0, a), (s, -a), (s, a)]
+        np.testing.assert_allclose(r["depth"], -gap, atol=2e-5)

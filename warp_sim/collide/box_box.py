@@ -9,6 +9,7 @@ from .manifold import (
     EDGE_AXIS_MIN_LENGTH,
     EDGE_PREFERENCE_ABSOLUTE,
     EDGE_PREFERENCE_RELATIVE,
+    NEAREST_TOLERANCE,
     Manifold,
     box_feature_id,
     manifold_empty,
@@ -456,13 +457,17 @@ def edge_face_manifold(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, rot_b: 
 
 
 @wp.func
-def with_nearest(m: Manifold, extra: Manifold) -> Manifold:
+def with_nearest(m: Manifold, extra: Manifold, tolerance: float) -> Manifold:
     """``m`` with the single point of ``extra`` (same normal) added where it is nearer than every
-    point of ``m``: in the slot of the same feature, else a free slot, else that of m's farthest
-    point.  For boxes apart, a clip or a strip holds the incident face's corners and crossings,
-    which can all lie further than the nearest features: a plate falling past another's edge,
-    its strip's points 96 to 108 mm off while its edges were 51 mm apart, went 29 mm into the
-    other before any point closed (bench/thin_rain.py's column of plates)."""
+    point of ``m`` by more than ``tolerance``: in the slot of the same feature, else a free slot,
+    else that of m's farthest point.  For boxes apart, a clip or a strip holds the incident face's
+    corners and crossings, which can all lie further than the nearest features: a plate falling
+    past another's edge, its strip's points 96 to 108 mm off while its edges were 51 mm apart,
+    went 29 mm into the other before any point closed (bench/thin_rain.py's column of plates).
+    Where the clip already holds the nearest features (a face approaching a face), the two
+    depths differ by rounding only, and a nearest point winning by an ulp took the slot of a
+    face corner chosen by rounding too: a cube sliding into a static step lost the step's top
+    corner on one side for a copy of a bottom corner and tripped with 13 % too much turn."""
     if extra.count == 0:
         return m
     if m.count == 0:
@@ -476,7 +481,7 @@ def with_nearest(m: Manifold, extra: Manifold) -> Manifold:
             far = k
         if m.feature[k] == extra.feature[0]:
             slot = k
-    if extra.depth[0] <= nearest:
+    if extra.depth[0] <= nearest + tolerance:
         return m
     out = m
     if slot < 0:
@@ -571,7 +576,7 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, covered_a:
             return faces
         edge = box_edge_contact(delta, rot_a, half_a, edge_a, rot_b, half_b, edge_b, normal, -edge_separation, pos_b)
         if faces.count >= 2:
-            return with_nearest(faces, edge)  # apart: the strip may lie further than the edges
+            return with_nearest(faces, edge, NEAREST_TOLERANCE * size)  # apart: the strip may lie further
         return edge
     normal = sign_of(wp.dot(delta, face_axis)) * face_axis
     m = manifold_empty()
@@ -590,5 +595,6 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, covered_a:
             return nearest
         # the clip's points keep its normal; the nearest pair's true distance is its gap
         nearest.normal = normal
-        return with_nearest(m, nearest)
+        size = half_a[0] + half_a[1] + half_a[2] + half_b[0] + half_b[1] + half_b[2]
+        return with_nearest(m, nearest, NEAREST_TOLERANCE * size)
     return m

@@ -39,6 +39,10 @@ EDGE_AXIS_MIN_LENGTH = 1.0e-6
 # An edge axis must beat the best face axis by more than this (see collide_box_box).
 EDGE_PREFERENCE_ABSOLUTE = 1.0e-4
 EDGE_PREFERENCE_RELATIVE = 0.05
+# The nearest pair of features of boxes apart joins a face manifold only where it is nearer than
+# all its points by more than this share of the boxes' summed half extents: rounding (float32,
+# about 1e-7 of the size) is not nearness (box_box.with_nearest).
+NEAREST_TOLERANCE = 2.0e-6
 BOX_EDGE_ID = 6
 BOX_VERTEX_ID = 18
 BOX_FEATURE_COUNT = 26
