@@ -153,7 +153,16 @@ def test_bulk_add_names_the_first_bad_entry():
         b.add_bodies(np.array(["sphere", "cone"]), 0.1)
     with pytest.raises(ValueError, match=r"orientation\[0\] must be a non-zero vector"):
         b.add_bodies("sphere", 0.1, position=np.zeros((2, 3)), orientation=np.zeros((2, 4)))
+    # three radii for three spheres, given as one 3-array, read as one row: named, not dropped
+    with pytest.raises(ValueError, match=r"^size\[0\] of a sphere must be its radius, \(r, 0, 0\) or \(r, r, r\), "
+                       r"got \[0.2, -0.1, 0.3\]; .*\(3, 1\) array$"):
+        b.add_bodies("sphere", np.array([0.2, -0.1, 0.3]), position=np.zeros((3, 3)))
+    with pytest.raises(ValueError, match=r"^size\[1\] of a sphere"):
+        b.add_bodies(np.array(["box", "sphere"]), np.array([[0.1, 0.2, 0.3], [0.1, 0.2, 0.1]]))
     assert b.body_count == 0  # nothing half-added
+    b.add_bodies("sphere", np.array([0.2, 0.2, 0.2]), position=np.zeros((3, 3)))  # (r, r, r) is one radius
+    b.add_bodies(np.array(["box", "sphere"]), np.array([[0.1, 0.2, 0.3], [0.1, 0.0, 0.0]]))
+    assert b.body_count == 5 and float(b.columns()["size"][4][0]) == 0.1
 
 
 def test_bodies_view_round_trips():

@@ -256,8 +256,9 @@ class ModelBuilder:
 
         shape: "sphere", "box", or an (n) array of those names or of 0 (sphere) / 1 (box).
         size: a scalar, an (n) or (n, 1) array (a sphere's radius, a cube's half extent), or
-        (3) or (n, 3) rows of half extents (a sphere's row is (r, ignored, ignored)).  A
-        3-array is always one row; give the radii of exactly 3 bodies as (3, 1).
+        (3) or (n, 3) rows of half extents (a sphere's row is (r, 0, 0) or (r, r, r); other
+        rows are an error).  A 3-array is always one row; give the radii of exactly 3 bodies as
+        (3, 1).
         mass, restitution, friction, static: a scalar or an (n) array.  position, velocity,
         angular_velocity: (3) or (n, 3); orientation: (4) or (n, 4) quaternions (x y z w), not
         all 0.  Every entry is checked with the rules of add_sphere / add_box; the first bad one
@@ -293,6 +294,15 @@ class ModelBuilder:
             sizes = np.repeat(np.broadcast_to(raw_size, (n,))[:, None], 3, axis=1)  # boxes: cubes
         else:
             sizes = self._rows_of(raw_size, n, 3, "size").copy()
+            # a sphere's row is (r, 0, 0) or (r, r, r); anything else in it was meant as something
+            # else (three radii read as one row of half extents), not silently dropped
+            odd = is_sphere & ~np.all((sizes[:, 1:] == 0.0) | (sizes[:, 1:] == sizes[:, :1]), axis=1)
+            if odd.any():
+                i = int(np.argmax(odd))
+                raise ValidationError(
+                    f"size[{i}] of a sphere must be its radius, (r, 0, 0) or (r, r, r), got "
+                    f"{[float(x) for x in sizes[i]]}; a 3-array is one row of half extents: give the radii of "
+                    f"3 bodies as a (3, 1) array")
         sizes[is_sphere, 1:] = 0.0
         spec = BODY_SCHEMA
         check_array(spec["radius"], sizes[is_sphere, 0], "size (radius)")
