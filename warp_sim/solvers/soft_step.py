@@ -46,7 +46,7 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import SHAPE_SPHERE
 from .contact_rows import closed_contact_bias, closed_during_substep
-from .impact import impact_terrain
+from .impact_terrain import impact_terrain
 from .solver_args import StepSettings
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
