@@ -165,6 +165,20 @@ def test_bulk_add_names_the_first_bad_entry():
     assert b.body_count == 5 and float(b.columns()["size"][4][0]) == 0.1
 
 
+def test_finalize_names_a_bad_device():
+    """An unknown device, or a CUDA device this machine lacks, is named: not Warp's own error."""
+    import warp as wp
+
+    b = ModelBuilder()
+    b.add_sphere(0.1, 1.0)
+    with pytest.raises(ValueError, match=r"^device must be 'cpu', 'cuda' or 'cuda:N', got 'tpu'$"):
+        b.finalize("tpu")
+    missing = f"cuda:{wp.get_cuda_device_count()}"
+    with pytest.raises(ValueError, match=rf"^device '{missing}' is not available \(\d+ CUDA devices found\)$"):
+        b.finalize(missing)
+    assert b.finalize(wp.get_device("cpu")).body_count == 1
+
+
 def test_bodies_view_round_trips():
     """builder.bodies gives one dict per body and can be assigned back (the demo does)."""
     b = ModelBuilder()

@@ -367,7 +367,16 @@ class ModelBuilder:
         order they were added in; ``"morton"`` and ``"shape_morton"`` store them sorted for memory
         locality, and the Model maps back (``body_scene_index``, ``to_scene_order``)."""
         from .body_order import body_order as order_of
+        from .validation import SIM_SCHEMA
 
+        if device is not None:  # None: Warp's default device
+            name = check(SIM_SCHEMA["device"], str(device), "device")
+            if name.startswith("cuda"):
+                import warp as wp
+
+                available = wp.get_cuda_device_count()
+                if int(name.partition(":")[2] or 0) >= available:
+                    raise ValidationError(f"device {name!r} is not available ({available} CUDA devices found)")
         per_edge = checkpoints_per_edge or self.default_checkpoints_per_edge()
         mode = check(Choice(BODY_ORDERS), body_order, "body_order")
         if mode == "scene":  # nothing permuted: the arrays are exactly the added order's
