@@ -494,7 +494,8 @@ class Simulator:
     def refreshed_pair_count(self) -> int:
         """Pairs found again mid-step (solvers/pair_refresh.py) since the last pass that found the
         pairs: in a step without a mid-step pass, that step's refreshes, counted over its later
-        substeps (a pair refreshed before two substeps counts twice)."""
+        substeps (a pair refreshed before two substeps counts twice).  A measurement taken between
+        steps (it reads the counts back to the host); the step itself never calls it."""
         if self.pairs is None:
             return 0
         live = min(int(self.contacts.pair_count.numpy()[0]), self.contacts.pair_max)

@@ -595,6 +595,5 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, covered_a:
             return nearest
         # the clip's points keep its normal; the nearest pair's true distance is its gap
         nearest.normal = normal
-        size = half_a[0] + half_a[1] + half_a[2] + half_b[0] + half_b[1] + half_b[2]
         return with_nearest(m, nearest, NEAREST_TOLERANCE * size)
     return m
