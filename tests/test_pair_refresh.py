@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from test_internal_edges import yaw
 from test_primitives import rotation
 from warp_sim import ModelBuilder, SimConfig, Simulator
 from warp_sim.builder import Material
@@ -187,10 +188,6 @@ def test_pairs_turned_less_than_the_tolerance_are_left_alone(device):
         np.testing.assert_array_equal(before[key], after[key])
     _, after, _ = refresh(case, tolerance=0.99 * swing, device=device)
     assert after["refreshed"] == 1
-
-
-def yaw(angle: float):
-    return (0.0, math.sin(angle / 2), 0.0, math.cos(angle / 2))
 
 
 @pytest.mark.parametrize("speed, radius, turn, crate", [
