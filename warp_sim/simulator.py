@@ -461,7 +461,8 @@ class Simulator:
                   c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
                   c.terrain_contact_surface, self.solver.sim_step]
         if self.sleep is not None:
-            arrays += [self.sleep.body_sleep_timer, self.sleep.body_inv_mass_awake]
+            arrays += [self.sleep.body_sleep_timer, self.sleep.body_sleep_speed, self.sleep.body_sleep_rise,
+                       self.sleep.body_inv_mass_awake]
         if self.pairs is not None:
             arrays += [c.prev_pair_count, c.prev_pair_body, c.prev_pair_point_count, c.prev_pair_feature,
                        c.prev_pair_normal, c.prev_pair_point, c.prev_pair_normal_impulse, c.prev_pair_tangent_impulse]

@@ -4,6 +4,13 @@ Box2D v3 puts whole islands to sleep.  Here the same rule is reached without bui
 
 * each dynamic body keeps a timer that grows while its fastest point moves slower than
   ``sleep_velocity`` (|v| + |w| r_bound, Box2D's measure) and resets otherwise;
+* the timer also resets while that speed has risen in every step for ``sleep_time / 2`` or
+  longer, each step by at least ``a_rise dt`` with a_rise = SLEEP_RISE_FRACTION sleep_velocity /
+  sleep_time: a body starting from rest down a shallow incline is accelerating, not settling.
+  On the speed alone it fell asleep below a = sleep_velocity / sleep_time (0.1 m/s^2 at the
+  defaults: a ball rolling down a 0.3 degree slope, a = 0.037 m/s^2, slept after 4.6 mm).  A
+  settling body's speed falls or jitters; it does not rise for 15 steps running.  What is left:
+  bodies accelerating under a_rise (0.01 m/s^2 at the defaults) still fall asleep;
 * a body sleeps when its own timer and those of all the dynamic bodies it touches have passed
   ``sleep_time``; so a pile sleeps when all of it has been still, as an island would;
 * a sleeping body that touches a body whose timer is short wakes up with its timer reset, and
@@ -35,6 +42,10 @@ from .launch import launch
 wp.set_module_options({"enable_backward": False})
 
 NO_NEIGHBOUR = 1.0e30
+# the smallest steady acceleration kept awake, as a fraction of sleep_velocity / sleep_time: small
+# enough to move the blind spot ten times lower, large enough that float32 noise in a resting
+# body's speed (1e-6 m/s) never reads as a rise
+SLEEP_RISE_FRACTION = 0.1
 
 
 @wp.kernel
@@ -125,12 +136,15 @@ def update_sleep(
     dt: float,
     sleep_velocity: float,
     sleep_time: float,
+    sleep_rise_step: float,
     # State in/out
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
     body_angmom: wp.array(dtype=wp.vec3),
     # Sleep in/out
     body_sleep_timer: wp.array(dtype=float),
+    body_sleep_speed: wp.array(dtype=float),
+    body_sleep_rise: wp.array(dtype=float),
     body_neighbour_timer: wp.array(dtype=float),
     # Out
     body_inv_mass_awake: wp.array(dtype=float),
@@ -145,8 +159,13 @@ def update_sleep(
     rot = body_rot[i]
     omega = rot * wp.cw_mul(body_inv_inertia[i], wp.transpose(rot) * body_angmom[i])
     speed = wp.length(body_vel[i]) + wp.length(omega) * body_bound_radius[i]
+    rise = 0.0
+    if speed > body_sleep_speed[i] + sleep_rise_step:
+        rise = body_sleep_rise[i] + dt
+    body_sleep_speed[i] = speed
+    body_sleep_rise[i] = rise
     timer = body_sleep_timer[i]
-    if speed < sleep_velocity:
+    if speed < sleep_velocity and rise < 0.5 * sleep_time:
         timer = timer + dt
     else:
         timer = 0.0
@@ -171,6 +190,8 @@ class Sleep:
         self.sleep_time = sleep_time
         n = max(model.body_count, 1)
         self.body_sleep_timer = wp.zeros(n, dtype=float, device=device)
+        self.body_sleep_speed = wp.zeros(n, dtype=float, device=device)  # the speed of the last update
+        self.body_sleep_rise = wp.zeros(n, dtype=float, device=device)  # how long that speed has risen
         self.body_neighbour_timer = wp.full(n, NO_NEIGHBOUR, dtype=float, device=device)
         self.body_inv_mass_awake = wp.clone(model.body_inv_mass)
         self.body_wake = wp.zeros(n, dtype=wp.int32, device=device)
@@ -201,11 +222,13 @@ class Sleep:
                 self.body_sleep_timer, self.body_neighbour_timer])  # atomics: never split (see above)
         launch(update_sleep, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_bound_radius, dt, self.sleep_velocity, self.sleep_time,
-            state.body_rot, state.body_vel, state.body_angmom, self.body_sleep_timer, self.body_neighbour_timer,
-            self.body_inv_mass_awake], device=self.device)
+            SLEEP_RISE_FRACTION * self.sleep_velocity / self.sleep_time * dt, state.body_rot, state.body_vel,
+            state.body_angmom, self.body_sleep_timer, self.body_sleep_speed, self.body_sleep_rise,
+            self.body_neighbour_timer, self.body_inv_mass_awake], device=self.device)
 
     def wake_all(self):
         self.body_sleep_timer.zero_()
+        self.body_sleep_rise.zero_()
         wp.copy(self.body_inv_mass_awake, self.model.body_inv_mass)
 
     def awake_count(self) -> int:
