@@ -3,6 +3,8 @@
     python bench/rain.py                                   # N = 1k, 10k, 100k; every broad phase
     python bench/rain.py --counts 10000 --broad-phases grid --sleep
     python bench/rain.py --contact-updates step                 # the default mode only
+    python bench/rain.py --counts 1000 10000 --broad-phases grid --contact-updates step \
+        --impacts auto always --tag _impacts                    # the impact stage on this inelastic rain
 
 The scene is ``warp_sim.cases.terrain_drop(N, "mix", body_contact=True)`` at dt = 1/60 with 4
 substeps (Box2D's benchmark rate), with contacts found once per step (the default) and every
@@ -34,9 +36,9 @@ LIMITS = {"all_pairs": 3000, "bounding_sphere": 10000}
 
 
 def measure(count: int, broad_phase: str, contact_update: str, settle: float, steps: int, device: str,
-            sleep: bool, pair_schedule: str = "auto") -> dict:
+            sleep: bool, pair_schedule: str = "auto", impacts: str = "auto") -> dict:
     row = {"bodies": count, "broad_phase": broad_phase, "contact_update": contact_update,
-           "pair_schedule": pair_schedule, "dt": 1 / 60, "substeps": 4, "sleep": sleep}
+           "pair_schedule": pair_schedule, "impacts": impacts, "dt": 1 / 60, "substeps": 4, "sleep": sleep}
     if count > LIMITS.get(broad_phase, count):
         return {**row, "steps": 0, "wall_s": "", "steps_per_s": "", "body_steps_per_s": "", "contacts": "",
                 "awake": "", "peak_penetration_m": "", "max_penetration_m": "",
@@ -44,7 +46,7 @@ def measure(count: int, broad_phase: str, contact_update: str, settle: float, st
     capacity = count * (count - 1) // 2 + 64 if broad_phase == "all_pairs" else 0
     sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase=broad_phase, device=device,
                              spacing=0.9, sleep=sleep, contact_max=capacity, rolling_resistance=0.2,
-                             contact_update=contact_update, pair_schedule=pair_schedule)
+                             contact_update=contact_update, pair_schedule=pair_schedule, impacts=impacts)
     # the schedule "auto" resolved to: slabs on the CPU, colours on CUDA (solvers/domains.py)
     row["pair_schedule"] = "domains" if sim.pairs.domain_count else "colors"
     sim.step(1)
@@ -75,17 +77,20 @@ def chart(rows: list[dict], path: Path, title: str):
     import matplotlib.pyplot as plt
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-    series = dict.fromkeys((r["broad_phase"], r["contact_update"], r["pair_schedule"]) for r in rows)
+    series = dict.fromkeys((r["broad_phase"], r["contact_update"], r["pair_schedule"], r.get("impacts", "auto"))
+                           for r in rows)
     schedules = {r["pair_schedule"] for r in rows}
     # one colour per (broad phase, contact update); the colour schedule dashed
     palette = plt.get_cmap("tab10").colors
-    hues = {key: palette[k % len(palette)] for k, key in enumerate(dict.fromkeys(k[:2] for k in series))}
-    for bp, update, schedule in series:
-        ok = [r for r in rows if (r["broad_phase"], r["contact_update"], r["pair_schedule"]) == (bp, update, schedule)
-              and r["status"] == "ok"]
+    stages = {r.get("impacts", "auto") for r in rows}
+    hues = {key: palette[k % len(palette)] for k, key in enumerate(dict.fromkeys(k[:2] + k[3:] for k in series))}
+    for bp, update, schedule, impacts in series:
+        ok = [r for r in rows if (r["broad_phase"], r["contact_update"], r["pair_schedule"], r.get("impacts", "auto"))
+              == (bp, update, schedule, impacts) and r["status"] == "ok"]
         if ok:
-            label = f"{bp}, contacts per {update}" + (f", {schedule}" if len(schedules) > 1 else "")
-            style = {"color": hues[(bp, update)], "ls": "--" if schedule == "colors" else "-", "marker": "o"}
+            label = (f"{bp}, contacts per {update}" + (f", {schedule}" if len(schedules) > 1 else "")
+                     + (f", impacts {impacts}" if len(stages) > 1 else ""))
+            style = {"color": hues[(bp, update, impacts)], "ls": "--" if schedule == "colors" else "-", "marker": "o"}
             ax.loglog([r["bodies"] for r in ok], [r["steps_per_s"] for r in ok], label=label, **style)
             ax2.loglog([r["steps_per_s"] for r in ok], [1000 * max(r["peak_penetration_m"], 1e-6) for r in ok],
                        label=label, **style)
@@ -117,6 +122,8 @@ def main(argv=None) -> int:
                    help="find contacts once per step (default mode) and/or every substep")
     p.add_argument("--pair-schedules", nargs="+", default=["auto"], choices=["auto", "domains", "colors"],
                    help="how the body-body sweeps run in parallel (SimConfig.pair_schedule)")
+    p.add_argument("--impacts", nargs="+", default=["auto"], choices=["auto", "always"],
+                   help="SimConfig.impacts: the impact stage only with restitution (this rain has none), or always")
     p.add_argument("--sleep", action="store_true")
     p.add_argument("--device", default="cpu")
     p.add_argument("--tag", default="")
@@ -128,12 +135,12 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     rows = []
-    cases_ = [(n, b, u, s) for n in args.counts for b in args.broad_phases for u in args.contact_updates
-              for s in args.pair_schedules]
-    for count, bp, update, schedule in tqdm(cases_, desc="rain", unit="case"):
-        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep, schedule)
+    cases_ = [(n, b, u, s, i) for n in args.counts for b in args.broad_phases for u in args.contact_updates
+              for s in args.pair_schedules for i in args.impacts]
+    for count, bp, update, schedule, impacts in tqdm(cases_, desc="rain", unit="case"):
+        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep, schedule, impacts)
         rows.append(row)
-        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['pair_schedule']:8s} "
+        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['pair_schedule']:8s} impacts {impacts:6s} "
                    f"{row['steps_per_s']!s:>9} steps/s  "
                    f"peak depth {row['peak_penetration_m']!s:>9} m  [{row['status']}]")
     name = f"rain_{args.device.replace(':', '')}{args.tag}"

@@ -201,11 +201,13 @@ def test_report_has_a_table_per_results_file(results, tmp_path):
 
 
 def test_rain_compares_both_contact_update_modes(tmp_path):
-    """bench/rain.py at a tiny size: one row per mode, each timed and with its landing depth."""
+    """bench/rain.py at a tiny size: one row per mode and impact-stage choice, each timed and with
+    its landing depth."""
     assert rain.main(["--counts", "60", "--broad-phases", "grid", "--settle", "0.6", "--steps", "3",
-                      "--out-dir", str(tmp_path)]) == 0
+                      "--impacts", "auto", "always", "--out-dir", str(tmp_path)]) == 0
     rows = read_csv(tmp_path / "rain_cpu.csv")
-    assert [r["contact_update"] for r in rows] == ["step", "substep"]
+    assert [(r["contact_update"], r["impacts"]) for r in rows] == [("step", "auto"), ("step", "always"),
+                                                                   ("substep", "auto"), ("substep", "always")]
     for r in rows:
         assert r["status"] == "ok"
         for key in ("steps_per_s", "peak_penetration_m", "max_penetration_m"):

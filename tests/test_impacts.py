@@ -343,7 +343,8 @@ def test_glancing_pair_keeps_angular_momentum(shapes, restitution, friction, see
     np.testing.assert_allclose(angular_momentum_about_origin(sim), l0, atol=1e-4 * scale)
 
 
-def step_trip(half: float, step_height: float, step_depth: float, friction: float, gap: float, device):
+def step_trip(half: float, step_height: float, step_depth: float, friction: float, gap: float, device,
+              impacts: str = "auto"):
     """No gravity, no floor: a cube (half ``half``, 1 kg) sliding at 3 m/s into a static step of
     height ``step_height`` (half depth ``step_depth``), e = 0.  Returns the cube's angular momentum
     about the step's top edge after the impact, over the value before."""
@@ -351,7 +352,8 @@ def step_trip(half: float, step_height: float, step_depth: float, friction: floa
     b.set_terrain(NoTerrain())
     b.add_box((step_depth, step_height / 2, 2.0), 1.0, position=(0.3 + step_depth, step_height / 2, 0.0), static=True)
     b.add_box((half, half, half), 1.0, position=(0.3 - half - gap, half, 0.0), velocity=(3.0, 0.0, 0.0))
-    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, device=device))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False, impacts=impacts,
+                                                  device=device))
     edge = np.array([0.3, step_height, 0.0])
     sim.step(int(gap / 3.0 * 60) + 3)
     pos = sim.state.body_pos.numpy()[-1].astype(float)
@@ -361,17 +363,27 @@ def step_trip(half: float, step_height: float, step_depth: float, friction: floa
     return about_edge / -(3.0 * (half - step_height))
 
 
-@pytest.mark.parametrize("half, step_height, step_depth, friction, gap", [
-    (0.25, 0.1, 2.0, 1.0, 0.037), (0.25, 0.1, 2.0, 0.0, 0.02), (0.5, 0.2, 2.0, 0.5, 0.03), (0.4, 0.15, 1.0, 1.0, 0.037),
-    (0.4, 0.15, 2.0, 1.0, 0.037), (0.4, 0.15, 2.0, 0.0, 0.02), (0.4, 0.1, 4.0, 0.5, 0.015), (0.4, 0.15, 0.5, 0.0, 0.02),
-    (0.3, 0.05, 3.0, 0.0, 0.011),
-    pytest.param(0.3, 0.05, 3.0, 1.0, 0.011, marks=pytest.mark.xfail(strict=True, reason=(
-        "known limitation (README, design notes: impacts): the impact's friction is swept after its compression, "
-        "so the turn it takes off can bring the face's lower points back to approaching, and the soft solve meets "
-        "them: a cube tripping with friction on a step a sixth of its height keeps 1.1 % too much angular "
-        "momentum about the edge")))])
+TRIPS = [(0.25, 0.1, 2.0, 1.0, 0.037), (0.25, 0.1, 2.0, 0.0, 0.02), (0.5, 0.2, 2.0, 0.5, 0.03), (0.4, 0.15, 1.0, 1.0, 0.037),
+         (0.4, 0.15, 2.0, 1.0, 0.037), (0.4, 0.15, 2.0, 0.0, 0.02), (0.4, 0.1, 4.0, 0.5, 0.015), (0.4, 0.15, 0.5, 0.0, 0.02),
+         (0.3, 0.05, 3.0, 0.0, 0.011), (0.3, 0.05, 3.0, 1.0, 0.011), (0.3, 0.03, 3.0, 0.5, 0.011),
+         (0.3, 0.05, 3.0, 1.0, 0.02)]
+# the inelastic scene's default, where the soft solve meets the impact (SimConfig.impacts): with
+# friction on a low step it leaves the face's lower points an impulse (SOFT_SOLVE_TRIP)
+SOFT_SOLVE_TRIPS = {(0.3, 0.05, 3.0, 1.0, 0.011), (0.3, 0.03, 3.0, 0.5, 0.011)}
+
+
+SOFT_SOLVE_TRIP = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, design notes: impacts), impacts = 'auto' only: an inelastic scene runs no impact stage, "
+    "and the soft solve's few sweeps leave the edge's friction and the face's normal impulses coupled through the "
+    "cube's turn: the face's lower points keep an impulse, 1.1 to 1.5 % too much angular momentum about the edge; "
+    "impacts = 'always' converges them (0.2 %)"))
+
+
+@pytest.mark.parametrize("half, step_height, step_depth, friction, gap, impacts", [
+    pytest.param(*trip, impacts, marks=SOFT_SOLVE_TRIP if impacts == "auto" and trip in SOFT_SOLVE_TRIPS else ())
+    for trip in TRIPS for impacts in ("auto", "always")])
 def test_cube_tripping_on_a_static_step_keeps_angular_momentum_about_the_edge(half, step_height, step_depth, friction,
-                                                                           gap, device):
+                                                                           gap, impacts, device):
     """Every impulse of the impact acts on the cube's face at the step (its points at the top edge
     and below it); after it, the cube turns about the top edge and the points below separate, so
     only the edge's impulse remains and the angular momentum about the edge is kept (the textbook
@@ -379,5 +391,6 @@ def test_cube_tripping_on_a_static_step_keeps_angular_momentum_about_the_edge(ha
     so 1 %.  While the boxes were apart the nearest pair of features, as deep as the face's clip
     to rounding, could take a clip point's slot (box_box.with_nearest): for some step sizes the
     step's top corner on one side gave way to a copy of a bottom corner, 13 to 19 % too much
-    angular momentum about the edge."""
-    assert step_trip(half, step_height, step_depth, friction, gap, device) == pytest.approx(1.0, abs=0.01)
+    angular momentum about the edge.  The scene is inelastic, so at the default the soft solve
+    meets the impact; ``impacts = "always"`` runs the impact stage (impact.py) on it."""
+    assert step_trip(half, step_height, step_depth, friction, gap, device, impacts) == pytest.approx(1.0, abs=0.01)

@@ -21,7 +21,7 @@ class NonFiniteStateError(RuntimeError):
 # The fields SimConfig hands to the solver under the same names (SimConfig.solver_settings).
 SOLVER_FIELDS = ("integrator", "rotation", "iterations", "relax_iterations", "relax_passes", "contact_hertz",
                  "damping_ratio", "max_push_velocity", "restitution_threshold", "convergence_tolerance",
-                 "convergence_gravity_share", "solver", "overflow_pairs")
+                 "convergence_gravity_share", "solver", "overflow_pairs", "impacts")
 
 
 @dataclass
@@ -43,6 +43,9 @@ class SimConfig:
     damping_ratio: float = 10.0
     max_push_velocity: float = 3.0
     restitution_threshold: float = 0.0  # [m/s] bounce only above this approach speed; 0: any impact (impact.py)
+    # the impact stage (impact.py): "auto" runs it where some body has restitution, "always" in
+    # inelastic scenes too (their impacts converged apart from the soft solve, at its cost)
+    impacts: str = "auto"
     convergence_tolerance: float = 1.0e-5
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"

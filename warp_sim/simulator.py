@@ -243,7 +243,7 @@ class Simulator:
                 self._stage("pairs", refresh_turned, self.physics_model, self.states[0], self.solver, self.pairs,
                             self.contacts, margin, self.config.turn_refresh)
             after_impacts = None
-            if self.config.recollide_outrun and self.physics_model.has_restitution:
+            if self.config.recollide_outrun and self.solver.runs_impacts(self.physics_model):
                 after_impacts = functools.partial(self._recollide_outrun, dt - k * h, margin, True)
             self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, k == 0, self.pairs.domain_schedule(),

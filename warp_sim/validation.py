@@ -28,6 +28,7 @@ SOLVERS = ("soft_step", "pushout")
 CONTACT_UPDATES = ("step", "substep")
 PAIR_SCHEDULES = ("auto", "domains", "colors")
 OVERFLOW_PAIRS = ("auto", "split", "in_order")
+IMPACT_STAGES = ("auto", "always")
 BODY_ORDERS = ("scene", "morton", "shape_morton")  # body_order.py
 
 
@@ -375,6 +376,7 @@ SIM_SCHEMA = {
     "damping_ratio": Number(ge=0),
     "max_push_velocity": Number(gt=0),
     "restitution_threshold": Number(ge=0),
+    "impacts": Choice(IMPACT_STAGES),
     "convergence_tolerance": Number(ge=0),
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),

@@ -2,7 +2,7 @@
 
 After Box2D v3's solver stages (one list, consumed by each scheduler).  One substep is
 
-    [impact begin, pair contact times, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with restitution
+    [impact begin, pair contact times, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with impacts
     prepare, warm start
     `iterations` solve sweeps (soft bias)
     integrate
@@ -49,7 +49,7 @@ class Stage:
 
 
 def substep_plan(iterations: int, relax_iterations: int, impacts: bool) -> tuple[Stage, ...]:
-    """The stages of one substep.  ``impacts``: the scene has restitution (model.has_restitution);
+    """The stages of one substep.  ``impacts``: the substep has an impact stage (SoftStepSolver.runs_impacts);
     a scene without runs no impact stage, and its relax sweeps close open gaps too."""
     plan = []
     if impacts:

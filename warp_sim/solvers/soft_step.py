@@ -368,7 +368,7 @@ def solve_and_integrate(
     no_turn = wp.mat33(0.0)
     toi_shift = wp.vec3(0.0)
     e = model.body_restitution[i]
-    if touching != 0 and e > 0.0:
+    if touching != 0 and (e > 0.0 or settings.impacts_always != 0):
         # impacts act on the velocity the last solve left, without this substep's gravity
         v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
         hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,

@@ -19,6 +19,7 @@ class StepSettings:
     soft_load: wp.vec3  # (h omega, zeta, 1 with gravity else 0): contact_rows.loaded_soft
     max_push_velocity: float
     restitution_threshold: float
+    impacts_always: int  # SolverSettings.impacts == "always": the impact stage in inelastic scenes too
     convergence_tolerance: float
     iterations: int
     relax_iterations: int
