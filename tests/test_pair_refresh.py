@@ -19,6 +19,7 @@ from test_primitives import rotation
 from warp_sim import ModelBuilder, SimConfig, Simulator
 from warp_sim.builder import Material
 from warp_sim.collide.primitives import collide_pair
+from warp_sim.kernel_args import BodyModel
 from warp_sim.solvers.pair_geometry import pair_point_now
 from warp_sim.solvers.pair_refresh import refresh_turned_pairs
 from warp_sim.solvers.soft_step import drift_rotation
@@ -33,7 +34,7 @@ MARGIN = 0.05
 
 @wp.kernel
 def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33),
-                   half: wp.array(dtype=wp.vec3), radius: wp.array(dtype=float), inv_mass: wp.array(dtype=float), ref_pos: wp.array(dtype=wp.vec3),
+                   half: wp.array(dtype=wp.vec3), model: BodyModel, ref_pos: wp.array(dtype=wp.vec3),
                    ref_rot: wp.array(dtype=wp.mat33), pair_normal: wp.array(dtype=wp.vec3),
                    pair_point: wp.array(dtype=wp.vec3), pair_depth: wp.array(dtype=float),
                    pair_point_count: wp.array(dtype=wp.int32), margin: float,
@@ -53,7 +54,7 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
     drj = drift_rotation(shape[1], rot[1], ref_rot[1])
     for k in range(pair_point_count[0]):
         now = pair_point_now(pair_normal[0], pair_point[k], pair_depth[k], ref_pos[0], ref_pos[1], dpi, dpj, dri, drj,
-                             radius[0], radius[1], inv_mass[0], inv_mass[1])
+                             ref_rot[0], ref_rot[1], 0, 1, model)
         read_gap[k] = now.separation
         read_end_i[k] = pos[0] + now.arm_i
         read_end_j[k] = pos[1] + now.arm_j
@@ -96,7 +97,10 @@ def refresh(case, tolerance=0.0, device="cpu"):
         ref_rot,
         bound, arrays([1], wp.int32, device), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device=device),
         count, n, points, depths, features, impulses, tangents, refreshed])
-    wp.launch(fresh_and_read, 1, device=device, inputs=[shape, pos, rot, half, radius, inv_mass, ref_pos, ref_rot, n,
+    model = BodyModel()  # the fields pair_point_now reads
+    model.body_sphere_radius, model.body_inv_mass, model.body_size = radius, inv_mass, half
+    model.body_covered_faces = arrays([0, 0], wp.int32, device)
+    wp.launch(fresh_and_read, 1, device=device, inputs=[shape, pos, rot, half, model, ref_pos, ref_rot, n,
                                                        points, depths, count, MARGIN, *scratch, fresh_count])
     after = {"count": count.numpy(), "normal": n.numpy(), "point": points.numpy(), "depth": depths.numpy(),
              "feature": features.numpy(), "impulse": impulses.numpy(), "refreshed": int(refreshed.numpy()[0])}

@@ -40,6 +40,7 @@ class BodyModel:
     body_rolling_resistance: wp.array(dtype=float)
     body_rolling_arm: wp.array(dtype=float)
     body_sphere_radius: wp.array(dtype=float)
+    body_covered_faces: wp.array(dtype=wp.int32)  # collide/covered_faces.py
     body_checkpoint_start: wp.array(dtype=wp.int32)
     body_checkpoint_count: wp.array(dtype=wp.int32)
     checkpoint_local: wp.array(dtype=wp.vec3)

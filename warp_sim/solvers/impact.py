@@ -50,25 +50,34 @@ only where a blow is still travelling.  On the CPU slab schedule the IMPACT_INNE
 run inside one launch (domains.py); the colour schedule launches them one by one.  What a chain
 longer than the sweeps leaves is stopped by the soft solve, inelastically (energy can only be lost).
 
-A contact whose gap is still open is engaged when it would close within the substep
-(gap + h v_n < 0).  Its velocities change at the substep's start, but the body reaches the
-contact only at t* = gap / |v_n| (the earliest engaged point of the manifold; 0 when one is
-already touching).  Moving the whole substep with v+ would bounce it up to h |v_n| early
-(a cube dropped flat from 2 m with e = 0.3 rose 13 mm too high), so each impact also leaves the
-position shift t* (v- - v+) that the piecewise motion, v- until t* and v+ after, adds to h v+
-(solver_toi_shift, spent by the next integration).  Along the normal the gap at the substep's
-end is then e (h |v_n| - gap) >= 0: the body bounces from the surface, never into it.  The
-impact itself acts on the velocity gravity has grown by t* (v- + g t*), and the substep's kick
-adds only the g (h - t*) after it: a rebound taken at the start lost (1 + e) g t* of its speed.
-Only the centre is shifted; the turn of an off-centre impact still starts at the substep's start.
-This is done against the terrain and static bodies only: between two moving bodies the arms of
-the impulse are those of the substep's start, and moving the centres to t* would break angular
-momentum by t* (v_i - v_j) x P, so there both bodies keep the early impact (the bounce is up to
-h |v_n| early, momentum and angular momentum exact).  Such an impact also drops the shift its
-bodies took from an earlier impact of the same substep: a ball bounced off a wall and then
-striking another ball within one substep is a sequence the shift of one event cannot describe
-(the ball stayed at the wall while its speed passed to the other), so that substep falls back
-to impacts all at its start.
+A contact whose gap is still open is engaged when it would close within the substep: when the
+gap at its end, gap + h (v_n + h g.n) with the substep's kick, is under zero (without the kick, a
+contact closed by the kick alone was left to the solve's speculative row, which met it
+inelastically: a cube dropped with e = 0.8 from a band of heights g h^2 wide bounced 11 mm
+short).  Its velocities change at the substep's start, but the bodies reach the contact only at
+t* = gap / |v_n| (the earliest engaged point of the manifold; 0 when one is already touching;
+for two spheres the exact root of |d + t v| = R_i + R_j, and for a sphere on a box refined on
+the contact found again at t*).  Moving the whole substep with v+ would bounce it up to h |v_n|
+early (a cube dropped flat from 2 m with e = 0.3 rose 13 mm too high), so each impact also
+leaves each body the position shift t* (v- - v+) that the piecewise motion, v- until t* and v+
+after, adds to h v+ (solver_toi_shift, spent by the next integration).  Along the normal the gap
+at the substep's end is then e (h |v_n| - gap) >= 0: the body bounces from the surface, never
+into it.  The impact itself acts on the velocity gravity has grown by t* (v- + g t*), and the
+substep's kick adds only the g (h - t*) after it: a rebound taken at the start lost (1 + e) g t*
+of its speed.
+
+The impulse acts where the bodies touch at t*: a pair's points are taken at the poses t* v and
+t* w carry the bodies to (pair_geometry.pair_point_now), one point of both bodies, so the
+impulse keeps linear and angular momentum about it, and the shifts carry that to the substep's
+end.  Taken at the substep's start instead, two balls still up to h |v| apart met along the
+wrong line (a billiard cut shot at 3 m/s sent the object ball 7.6 degrees off the line of
+centres), and between moving bodies the shifts had to be dropped (the start's arms with t*'s
+centres broke angular momentum by t* (v_i - v_j) x P), so a cube thrown at a free box rebounded
+from up to h |v| before it touched (19 mm off the gap the piecewise motion gives).  A sequence of
+events in one substep adds its shifts: a ball struck at t1 that meets a wall at t2 and comes back
+to the striker at t3 ends where the three events put it, and the solve's speculative rows count
+the shifts too (pair_solve.solve_pair_points).  Only the centre is shifted; the turn of an
+off-centre impact still starts at the substep's start.
 
 A body meets what lies nearest first: a terrain point closing after one of the body's pairs does
 is ``shadowed`` until an impact has changed the body (pair_contact_times says why).  Between pairs
@@ -80,10 +89,10 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
-from .impact_point import coulomb_step, engage_speed, engaged, time_to_contact
+from .impact_point import coulomb_step, engage_speed, engaged, spheres_touch_time, time_to_contact
 from .impact_terrain import (IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED,
                              impact_terrain)
-from .pair_geometry import pair_point_now, read_pair_velocity
+from .pair_geometry import NO_CONTACT, pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -95,6 +104,10 @@ POINTS = 4
 # (mean of 6 seeds); 64 sweeps would still gain (the column converges like a diffusion).
 IMPACT_SWEEPS = 4
 IMPACT_INNER = 4
+# A sphere-box impact's time is refined on the contact found again at it (impact_pair_velocity), at
+# most this many times, until the gap there is under TOI_GAP_TOLERANCE [m]
+SPHERE_BOX_REFINES = 3
+TOI_GAP_TOLERANCE = 1.0e-5
 
 
 @wp.func
@@ -196,8 +209,7 @@ def impact_terrain_body(
 @wp.struct
 class PairImpact:
     """A pair's impact: both bodies' new velocities (without the gravity of t*), each one's
-    time-of-impact shift from this pair, whether the pair struck (``hit``) and whether both bodies
-    move (``early``: the impact is kept at the substep's start, see impact_pair_velocity)."""
+    time-of-impact shift from this pair, and whether the pair struck (``hit``)."""
 
     vi: wp.vec3
     wi: wp.vec3
@@ -206,7 +218,6 @@ class PairImpact:
     shift_i: wp.vec3
     shift_j: wp.vec3
     hit: int
-    early: int
 
 
 @wp.func(inline=True)
@@ -244,35 +255,29 @@ def impact_pair_velocity(
     dpj = solver.solver_drift_p[j]
     dri = solver.solver_drift_r[i]
     drj = solver.solver_drift_r[j]
+    rri = solver.solver_ref_rot[i]
+    rrj = solver.solver_ref_rot[j]
     radius_i = model.body_sphere_radius[i]
     radius_j = model.body_sphere_radius[j]
-    # the points' geometry at the current pose, found once: rows k of normal, arm_i, arm_j
-    normal = wp.mat44(0.0)
-    arm_i = wp.mat44(0.0)
-    arm_j = wp.mat44(0.0)
+    # the shifts of impacts taken earlier in the substep are motion the bodies make too (v- until
+    # their t*): a box bounced off one corner late in the substep keeps closing on the rest
+    dpi = dpi + solver.solver_toi_shift[i]
+    dpj = dpj + solver.solver_toi_shift[j]
     acc = wp.vec4(NOT_ENGAGED)
     hit = int(0)
     bounces = int(0)
     toi = settings.h
+    # the relative speed the substep's gravity adds (dynamic bodies only)
+    kick = settings.h * (wp.where(inv_mi > 0.0, 1.0, 0.0) - wp.where(inv_mj > 0.0, 1.0, 0.0)) * settings.gravity
     for k in range(count):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                             xi, xj, dpi, dpj, dri, drj, radius_i, radius_j, model.body_inv_mass[i],
-                             model.body_inv_mass[j])
-        for axis in range(3):
-            normal[k, axis] = now.normal[axis]
-            arm_i[k, axis] = now.arm_i[axis]
-            arm_j[k, axis] = now.arm_j[axis]
+                             xi, xj, dpi, dpj, dri, drj, rri, rrj, i, j, model)
         vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
-        # against a static body, the shifts of impacts taken earlier in the substep are motion it
-        # makes too (v- until their t*): a box bounced off one corner late in the substep keeps
-        # closing on the rest.  Between moving bodies the impact is early and drops the shifts
-        gap = now.separation
-        if inv_mi == 0.0 or inv_mj == 0.0:
-            gap = gap + wp.dot(solver.solver_toi_shift[i] - solver.solver_toi_shift[j], now.normal)
-        if engaged(gap, vn, settings.h):
+        # engaged on the speed the substep's kick leaves, as impact_terrain's points
+        if engaged(now.separation, vn + wp.dot(kick, now.normal), settings.h):
             acc[k] = 0.0
-            toi = time_to_contact(gap, vn, toi)
+            toi = time_to_contact(now.separation, vn, toi)
             if vn < -engage_speed(settings.gravity, settings.h):
                 hit = 1
             if vn < -settings.restitution_threshold:
@@ -281,12 +286,48 @@ def impact_pair_velocity(
         return out
     if bounces == 0:
         e = 0.0
-    early = inv_mi > 0.0 and inv_mj > 0.0
-    if early:
-        # two moving bodies: the impulse's arms are taken at the substep's start, so moving the
-        # centres to t* would break angular momentum by t* (v_i - v_j) x P; they keep the early
-        # impact (both equally, so momentum and angular momentum hold exactly)
-        toi = 0.0
+    if radius_i > 0.0 and radius_j > 0.0:
+        toi = spheres_touch_time(xi + dpi - xj - dpj, vi - vj, radius_i + radius_j, settings.h, toi)
+    # the impulse acts where the bodies touch, at t*: the points' geometry there (rows k of normal,
+    # arm_i, arm_j), the bodies moved on by t* v and turned by t* w.  Taken at the substep's start
+    # instead, two balls still up to h |v| apart met along the wrong line (a billiard cut shot at
+    # 3 m/s sent the object ball 7.6 degrees off the line of centres) and a ball rolling into a
+    # step's edge was pushed along the edge-to-centre line of before it touched (14 % of its speed
+    # lost, e = 0, mu = 0).  Every body's centre is then shifted to the piecewise motion (v- until
+    # t*, v+ after), moving bodies too: the impulse, at one point of both at t*, keeps linear and
+    # angular momentum about that point (pair_geometry.py), and the shifts carry that to the end
+    # of the substep: L = sum x(t*) x m v+ + spins, as the piecewise motion has it.
+    # A sphere on a box: its contact found again at t* (pair_geometry.sphere_box_point) turns where
+    # it meets an edge, so t* from the substep's start (gap / |v_n| along the normal there) is
+    # refined on the geometry at t*, a few Newton steps on the gap
+    sphere_box = (radius_i > 0.0) != (radius_j > 0.0)
+    turns_i = wp.where(radius_i > 0.0, 0.0, 1.0)  # a sphere's anchor does not turn (soft_step.drift_rotation)
+    turns_j = wp.where(radius_j > 0.0, 0.0, 1.0)
+    ident = wp.identity(n=3, dtype=float)
+    for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
+        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS], xi, xj,
+                            dpi + toi * vi, dpj + toi * vj, dri + (turns_i * toi) * wp.skew(wi) * (ident + dri),
+                            drj + (turns_j * toi) * wp.skew(wj) * (ident + drj), rri, rrj, i, j, model)
+        vn_at = wp.dot(vi + wp.cross(wi, at.arm_i) - vj - wp.cross(wj, at.arm_j), at.normal)
+        if at.separation == NO_CONTACT or wp.abs(at.separation) <= TOI_GAP_TOLERANCE or vn_at >= 0.0:
+            break
+        toi = wp.clamp(toi + at.separation / -vn_at, 0.0, settings.h)
+    dpi_t = dpi + toi * vi
+    dpj_t = dpj + toi * vj
+    dri_t = dri + (turns_i * toi) * wp.skew(wi) * (ident + dri)
+    drj_t = drj + (turns_j * toi) * wp.skew(wj) * (ident + drj)
+    normal = wp.mat44(0.0)
+    arm_i = wp.mat44(0.0)
+    arm_j = wp.mat44(0.0)
+    for k in range(count):
+        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
+                            xi, xj, dpi_t, dpj_t, dri_t, drj_t, rri, rrj, i, j, model)
+        if at.separation == NO_CONTACT:
+            acc[k] = NOT_ENGAGED
+        for axis in range(3):
+            normal[k, axis] = at.normal[axis]
+            arm_i[k, axis] = at.arm_i[axis]
+            arm_j[k, axis] = at.arm_j[axis]
     # the impact acts at t*, on the velocities gravity has grown by then (dynamic bodies only)
     gi = wp.where(inv_mi > 0.0, toi, 0.0) * settings.gravity
     gj = wp.where(inv_mj > 0.0, toi, 0.0) * settings.gravity
@@ -357,7 +398,6 @@ def impact_pair_velocity(
             if removed < IMPACT_SLIP_TOLERANCE:
                 break
     out.hit = 1
-    out.early = int(early)
     out.vi = vi - gi
     out.wi = wi
     out.vj = vj - gj
@@ -405,12 +445,12 @@ def impact_pair(
         solver.solver_impact_stamp[i] = impact_sweep
         solver.solver_v[i] = out.vi
         solver.solver_w[i] = out.wi
-        solver.solver_toi_shift[i] = wp.where(out.early != 0, wp.vec3(0.0), solver.solver_toi_shift[i] + out.shift_i)
+        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + out.shift_i
     if inv_mj > 0.0:
         solver.solver_impact_stamp[j] = impact_sweep
         solver.solver_v[j] = out.vj
         solver.solver_w[j] = out.wj
-        solver.solver_toi_shift[j] = wp.where(out.early != 0, wp.vec3(0.0), solver.solver_toi_shift[j] + out.shift_j)
+        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + out.shift_j
 
 
 @wp.kernel
@@ -486,10 +526,12 @@ def pair_contact_times(
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
                              solver.solver_ref_pos[i], solver.solver_ref_pos[j], solver.solver_drift_p[i],
                              solver.solver_drift_p[j], solver.solver_drift_r[i], solver.solver_drift_r[j],
-                             model.body_sphere_radius[i], model.body_sphere_radius[j], model.body_inv_mass[i],
-                             model.body_inv_mass[j])
+                             solver.solver_ref_rot[i], solver.solver_ref_rot[j], i, j, model)
         vn = wp.dot(vel.vi + wp.cross(vel.wi, now.arm_i) - vel.vj - wp.cross(vel.wj, now.arm_j), now.normal)
-        if engaged(now.separation, vn, settings.h) and vn < -engage_speed(settings.gravity, settings.h):
+        kick = settings.h * (wp.where(model.body_inv_mass[i] > 0.0, 1.0, 0.0)
+                             - wp.where(model.body_inv_mass[j] > 0.0, 1.0, 0.0)) * settings.gravity
+        if (engaged(now.separation, vn + wp.dot(kick, now.normal), settings.h)
+                and vn < -engage_speed(settings.gravity, settings.h)):
             toi = time_to_contact(now.separation, vn, toi)
     if toi < settings.h:
         wp.atomic_min(solver.solver_pair_toi, i, toi)

@@ -55,6 +55,23 @@ def time_to_contact(gap: float, vn: float, toi: float) -> float:
 
 
 @wp.func
+def spheres_touch_time(d: wp.vec3, dv: wp.vec3, reach: float, h: float, toi: float) -> float:
+    """When two spheres whose centres are ``d`` apart (i minus j), closing at the relative velocity
+    ``dv``, touch: the earlier root of |d + t dv| = reach (their radii summed), exact for straight
+    motion where time_to_contact's gap / |v_n| takes the normal of the start (a glancing approach
+    closes along a curve in the normal); 0 when they touch already, ``toi`` where they miss."""
+    c = wp.dot(d, d) - reach * reach
+    if c <= 0.0:
+        return 0.0
+    a = wp.dot(dv, dv)
+    b = wp.dot(d, dv)
+    disc = b * b - a * c
+    if a == 0.0 or b >= 0.0 or disc < 0.0:
+        return toi
+    return wp.min(c / (-b + wp.sqrt(disc)), h)  # (-b - sqrt(disc)) / a, without the cancellation
+
+
+@wp.func
 def coulomb_step(old_t: wp.vec3, vt: wp.vec3, k_t: float, limit: float) -> wp.vec3:
     """The accumulated tangential impulse after pushing against the slip vt, clamped to the disc."""
     new_t = old_t

@@ -30,8 +30,7 @@ The sum is taken in 32.32 fixed point with integer atomics, whose result does no
 order the threads add in (float atomics would round differently run to run on a GPU), and applied
 by one owner pair per body (its lowest pair index).  The impact stage (impact.py) is split the
 same way, one split sweep per impact sweep: each pair's time-of-impact shift is summed like its
-velocity change, the owner stamps the body with the sweep, and a body struck by a pair of two
-moving bodies keeps its impact early, as impact_pair has it.  Only the chain passes of
+velocity change, and the owner stamps the body with the sweep.  Only the chain passes of
 heavy-on-light pairs (pair_solve.chain_pair) in the overflow set are still walked in order by one
 thread (they walk the lighter body's terrain contacts too).
 
@@ -205,8 +204,7 @@ def overflow_impact_pass(
     solver_overflow_hit: wp.array(dtype=wp.int32),
 ):
     """One impact sweep of every overflow pair (impact.impact_pair's, with split masses): velocity
-    changes and time-of-impact shifts summed per body, and per body 1 if a pair struck it, 2 if
-    one of those kept its impact early (impact.impact_pair_velocity).  Stamps are read as the
+    changes and time-of-impact shifts summed per body, and per body 1 if a pair struck it.  Stamps are read as the
     sweep before left them and written by overflow_impact_apply."""
     t = wp.tid()
     for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
@@ -231,11 +229,11 @@ def overflow_impact_pass(
         if inv_mi > 0.0:
             add_split_change(solver_overflow_velocity, i, out.vi - vel.vi, out.wi - vel.wi, split_i)
             add_fixed(solver_overflow_shift, 3 * i, out.shift_i / split_i)
-            wp.atomic_max(solver_overflow_hit, i, 1 + out.early)
+            wp.atomic_max(solver_overflow_hit, i, 1)
         if inv_mj > 0.0:
             add_split_change(solver_overflow_velocity, j, out.vj - vel.vj, out.wj - vel.wj, split_j)
             add_fixed(solver_overflow_shift, 3 * j, out.shift_j / split_j)
-            wp.atomic_max(solver_overflow_hit, j, 1 + out.early)
+            wp.atomic_max(solver_overflow_hit, j, 1)
 
 
 @wp.kernel
@@ -257,7 +255,7 @@ def overflow_impact_apply(
     solver_impact_stamp: wp.array(dtype=wp.int32),
 ):
     """Each struck body's summed impact applied by its owner pair, as impact_pair writes one: the
-    sweep's stamp, and the shift added to the body's, or in place of it after an early impact."""
+    sweep's stamp, and the shift added to the body's."""
     t = wp.tid() + tid_offset
     for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
         p = color_pairs_sorted[index]
@@ -268,7 +266,7 @@ def overflow_impact_apply(
                 solver_v[b] = solver_v[b] + take_fixed(solver_overflow_velocity, 6 * b)
                 solver_w[b] = solver_w[b] + take_fixed(solver_overflow_velocity, 6 * b + 3)
                 shift = take_fixed(solver_overflow_shift, 3 * b)
-                solver_toi_shift[b] = wp.where(solver_overflow_hit[b] == 2, shift, solver_toi_shift[b] + shift)
+                solver_toi_shift[b] = solver_toi_shift[b] + shift
                 solver_impact_stamp[b] = impact_sweep
                 solver_overflow_hit[b] = 0
 
