@@ -37,7 +37,7 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
                    half: wp.array(dtype=wp.vec3), model: BodyModel, ref_pos: wp.array(dtype=wp.vec3),
                    ref_rot: wp.array(dtype=wp.mat33), pair_normal: wp.array(dtype=wp.vec3),
                    pair_point: wp.array(dtype=wp.vec3), pair_depth: wp.array(dtype=float),
-                   pair_point_count: wp.array(dtype=wp.int32), margin: float,
+                   pair_feature: wp.array(dtype=wp.int32), pair_point_count: wp.array(dtype=wp.int32), margin: float,
                    fresh_depth: wp.array(dtype=float), fresh_point: wp.array(dtype=wp.vec3),
                    read_gap: wp.array(dtype=float), read_end_i: wp.array(dtype=wp.vec3),
                    read_end_j: wp.array(dtype=wp.vec3), fresh_count: wp.array(dtype=wp.int32)):
@@ -53,8 +53,8 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
     dri = drift_rotation(shape[0], rot[0], ref_rot[0])
     drj = drift_rotation(shape[1], rot[1], ref_rot[1])
     for k in range(pair_point_count[0]):
-        now = pair_point_now(pair_normal[0], pair_point[k], pair_depth[k], ref_pos[0], ref_pos[1], dpi, dpj, dri, drj,
-                             ref_rot[0], ref_rot[1], 0, 1, model)
+        now = pair_point_now(pair_normal[0], pair_point[k], pair_depth[k], pair_feature[k], ref_pos[0], ref_pos[1],
+                             dpi, dpj, dri, drj, ref_rot, 0, 1, model)
         read_gap[k] = now.separation
         read_end_i[k] = pos[0] + now.arm_i
         read_end_j[k] = pos[1] + now.arm_j
@@ -101,7 +101,7 @@ def refresh(case, tolerance=0.0, device="cpu"):
     model.body_sphere_radius, model.body_inv_mass, model.body_size = radius, inv_mass, half
     model.body_covered_faces = arrays([0, 0], wp.int32, device)
     wp.launch(fresh_and_read, 1, device=device, inputs=[shape, pos, rot, half, model, ref_pos, ref_rot, n,
-                                                       points, depths, count, MARGIN, *scratch, fresh_count])
+                                                       points, depths, features, count, MARGIN, *scratch, fresh_count])
     after = {"count": count.numpy(), "normal": n.numpy(), "point": points.numpy(), "depth": depths.numpy(),
              "feature": features.numpy(), "impulse": impulses.numpy(), "refreshed": int(refreshed.numpy()[0])}
     fresh = {"count": int(fresh_count.numpy()[0]), "depth": scratch[0].numpy(), "point": scratch[1].numpy(),

@@ -99,6 +99,7 @@ class PairContacts:
     pair_normal: wp.array(dtype=wp.vec3)
     pair_point: wp.array(dtype=wp.vec3)
     pair_depth: wp.array(dtype=float)
+    pair_feature: wp.array(dtype=wp.int32)
     pair_normal_impulse: wp.array(dtype=float)
     pair_tangent_impulse: wp.array(dtype=wp.vec3)
     pair_relax_chain: wp.array(dtype=wp.int32)

@@ -255,8 +255,6 @@ def impact_pair_velocity(
     dpj = solver.solver_drift_p[j]
     dri = solver.solver_drift_r[i]
     drj = solver.solver_drift_r[j]
-    rri = solver.solver_ref_rot[i]
-    rrj = solver.solver_ref_rot[j]
     radius_i = model.body_sphere_radius[i]
     radius_j = model.body_sphere_radius[j]
     # the shifts of impacts taken earlier in the substep are motion the bodies make too (v- until
@@ -272,7 +270,8 @@ def impact_pair_velocity(
     for k in range(count):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                             xi, xj, dpi, dpj, dri, drj, rri, rrj, i, j, model)
+                             pairs.pair_feature[p * POINTS + k], xi, xj, dpi, dpj, dri, drj, solver.solver_ref_rot, i, j,
+                             model)
         vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
         # engaged on the speed the substep's kick leaves, as impact_terrain's points
         if engaged(now.separation, vn + wp.dot(kick, now.normal), settings.h):
@@ -305,9 +304,10 @@ def impact_pair_velocity(
     turns_j = wp.where(radius_j > 0.0, 0.0, 1.0)
     ident = wp.identity(n=3, dtype=float)
     for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
-        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS], xi, xj,
-                            dpi + toi * vi, dpj + toi * vj, dri + (turns_i * toi) * wp.skew(wi) * (ident + dri),
-                            drj + (turns_j * toi) * wp.skew(wj) * (ident + drj), rri, rrj, i, j, model)
+        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS],
+                            pairs.pair_feature[p * POINTS], xi, xj, dpi + toi * vi, dpj + toi * vj,
+                            dri + (turns_i * toi) * wp.skew(wi) * (ident + dri),
+                            drj + (turns_j * toi) * wp.skew(wj) * (ident + drj), solver.solver_ref_rot, i, j, model)
         vn_at = wp.dot(vi + wp.cross(wi, at.arm_i) - vj - wp.cross(wj, at.arm_j), at.normal)
         if at.separation == NO_CONTACT or wp.abs(at.separation) <= TOI_GAP_TOLERANCE or vn_at >= 0.0:
             break
@@ -321,7 +321,8 @@ def impact_pair_velocity(
     arm_j = wp.mat44(0.0)
     for k in range(count):
         at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                            xi, xj, dpi_t, dpj_t, dri_t, drj_t, rri, rrj, i, j, model)
+                            pairs.pair_feature[p * POINTS + k], xi, xj, dpi_t, dpj_t, dri_t, drj_t, solver.solver_ref_rot,
+                            i, j, model)
         if at.separation == NO_CONTACT:
             acc[k] = NOT_ENGAGED
         for axis in range(3):
@@ -524,9 +525,9 @@ def pair_contact_times(
     toi = settings.h
     for k in range(pairs.pair_point_count[p]):
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                             solver.solver_ref_pos[i], solver.solver_ref_pos[j], solver.solver_drift_p[i],
-                             solver.solver_drift_p[j], solver.solver_drift_r[i], solver.solver_drift_r[j],
-                             solver.solver_ref_rot[i], solver.solver_ref_rot[j], i, j, model)
+                             pairs.pair_feature[p * POINTS + k], solver.solver_ref_pos[i], solver.solver_ref_pos[j],
+                             solver.solver_drift_p[i], solver.solver_drift_p[j], solver.solver_drift_r[i],
+                             solver.solver_drift_r[j], solver.solver_ref_rot, i, j, model)
         vn = wp.dot(vel.vi + wp.cross(vel.wi, now.arm_i) - vel.vj - wp.cross(vel.wj, now.arm_j), now.normal)
         kick = settings.h * (wp.where(model.body_inv_mass[i] > 0.0, 1.0, 0.0)
                              - wp.where(model.body_inv_mass[j] > 0.0, 1.0, 0.0)) * settings.gravity

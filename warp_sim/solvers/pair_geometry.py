@@ -36,18 +36,21 @@ n = (c_i - c_j) / |c_i - c_j|, the gap s = |c_i - c_j| - (R_i + R_j), and the ar
 so a frictionless impulse turns neither ball (midpoint arms of the stored anchors would: they
 leave the line when the balls slide past each other).
 
-A sphere and a box need none either: the box's point nearest the sphere's current centre, found
-as the narrow phase finds it (collide_sphere_box, covered faces included), gives the normal, the
-gap and one point for both arms, the sphere's support point.  The stored normal is the one
-of the pass's pose, and where the ball meets an edge or a corner the contact turns as it moves: a
-ball rolling at 4 m/s into a 3 cm step was pushed along the edge-to-centre line of a substep's
-travel before it touched, and lost 11 % of its speed with e = 0 and mu = 0 (23 % where its impact
-used it too).  A centre beyond covered faces only (the covering box's to touch) has no contact
-here: the separation is NO_CONTACT, which no row or impact acts on.
+A sphere at a box's edge or corner needs none either: the box's point nearest the sphere's
+current centre, found as the narrow phase finds it (collide_sphere_box, covered faces included),
+gives the normal, the gap and one point for both arms, the sphere's support point.  The stored
+normal is the one of the pass's pose, and where the ball meets an edge or a corner the contact
+turns as it moves: a ball rolling at 4 m/s into a 3 cm step was pushed along the edge-to-centre
+line of a substep's travel before it touched, and lost 11 % of its speed with e = 0 and mu = 0
+(23 % where its impact used it too).  A contact the pass found on a face keeps the stored one (a
+face's normal stays the face's, and finding it again in every sweep cost the CPU's solve sweeps
+more than the rest of this change).  A centre beyond covered faces only (the covering box's to
+touch) has no contact here: the separation is NO_CONTACT, which no row or impact acts on.
 """
 
 import warp as wp
 
+from ..collide.manifold import BOX_EDGE_ID
 from ..collide.primitives import collide_sphere_box
 from ..kernel_args import BodyModel
 from .solver_args import SolverBodies
@@ -131,40 +134,43 @@ def sphere_box_point(
     return out
 
 
-@wp.func
+@wp.func(inline=True)
 def pair_point_now(
     n_ref: wp.vec3,
     point: wp.vec3,
     depth: float,
+    feature: int,
     x_ref_i: wp.vec3,
     x_ref_j: wp.vec3,
     drift_p_i: wp.vec3,
     drift_p_j: wp.vec3,
     drift_r_i: wp.mat33,
     drift_r_j: wp.mat33,
-    rot_ref_i: wp.mat33,
-    rot_ref_j: wp.mat33,
+    rot_ref: wp.array(dtype=wp.mat33),
     i: int,
     j: int,
     # Model
     model: BodyModel,
 ) -> PairPoint:
-    """Pair (i, j)'s point (stored at the pass's pose: ``n_ref``, ``point``, ``depth``) at the pose
-    the drifts give from the reference (x_ref, rot_ref)."""
+    """Pair (i, j)'s point (stored at the pass's pose: ``n_ref``, ``point``, ``depth``, ``feature``)
+    at the pose the drifts give from the reference (x_ref, and the rotations in ``rot_ref``, read
+    only for a sphere on a box's edge or corner)."""
     out = PairPoint()
     sphere_radius_i = model.body_sphere_radius[i]
     sphere_radius_j = model.body_sphere_radius[j]
-    if (sphere_radius_i > 0.0) != (sphere_radius_j > 0.0):
+    # a sphere found at a box's edge or corner (its stored normal turns as it moves; a face's
+    # stays the face's): its contact found again here
+    if (sphere_radius_i > 0.0) != (sphere_radius_j > 0.0) and feature >= BOX_EDGE_ID:
         ident = wp.identity(n=3, dtype=float)
         found = PairPoint()
         radius = wp.max(sphere_radius_i, sphere_radius_j)
         if sphere_radius_i > 0.0:
             found = sphere_box_point(x_ref_i + drift_p_i, sphere_radius_i, x_ref_j + drift_p_j,
-                                     (ident + drift_r_j) * rot_ref_j, model.body_size[j], model.body_covered_faces[j],
+                                     (ident + drift_r_j) * rot_ref[j], model.body_size[j], model.body_covered_faces[j],
                                      True)
         else:
             found = sphere_box_point(x_ref_j + drift_p_j, sphere_radius_j, x_ref_i + drift_p_i,
-                                     (ident + drift_r_i) * rot_ref_i, model.body_size[i], model.body_covered_faces[i],
+                                     (ident + drift_r_i) * rot_ref[i], model.body_size[i], model.body_covered_faces[i],
                                      False)
         # only while the centre is outside the box and on the stored normal's side: a centre that
         # has sunk into a thin box past its middle finds the far face nearest, and would be pushed

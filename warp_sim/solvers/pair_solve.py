@@ -12,7 +12,7 @@ from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair
 from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
-from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
+from .pair_geometry import PairPoint, PairVelocity, pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
 
@@ -132,10 +132,6 @@ def solve_pair_points(
     drift_pj = solver.solver_drift_p[j]
     drift_ri = solver.solver_drift_r[i]
     drift_rj = solver.solver_drift_r[j]
-    rot_ri = solver.solver_ref_rot[i]
-    rot_rj = solver.solver_ref_rot[j]
-    shift_i = solver.solver_toi_shift[i]
-    shift_j = solver.solver_toi_shift[j]
     vel = vel_in
     friction = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     count = pairs.pair_point_count[p]
@@ -168,8 +164,9 @@ def solve_pair_points(
             slot = p * POINTS + k
             # normal, arms and gap now (pair_geometry.py: one point for both bodies keeps angular momentum)
             # (where the point sits follows the bodies' own masses, split or not)
-            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], xi, xj,
-                                 drift_pi, drift_pj, drift_ri, drift_rj, rot_ri, rot_rj, i, j, model)
+            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
+                                 pairs.pair_feature[slot], xi, xj, drift_pi, drift_pj, drift_ri, drift_rj,
+                                 solver.solver_ref_rot, i, j, model)
             n = now.normal
             ri = now.arm_i
             rj = now.arm_j
@@ -193,7 +190,8 @@ def solve_pair_points(
                     # towards a wall only at t*, and the gap from its start pose let it close at
                     # gap / h only (a ball struck at 40 m/s left at 31 m/s)
                     if mode == MODE_SOLVE:
-                        separation = wp.max(separation + wp.dot(shift_i - shift_j, n), 0.0)
+                        shift = solver.solver_toi_shift[i] - solver.solver_toi_shift[j]
+                        separation = wp.max(separation + wp.dot(shift, n), 0.0)
                     bias = separation / settings.h
                 elif mode == MODE_SOLVE:
                     soft = settings.soft
@@ -327,8 +325,6 @@ def warm_start_pair_side(
     w = solver.solver_w[b]
     x_i = state_in.body_pos[i]
     x_j = state_in.body_pos[j]
-    rot_i = state_in.body_rot[i]
-    rot_j = state_in.body_rot[j]
     drift_pi = wp.vec3(0.0)
     drift_pj = wp.vec3(0.0)
     drift_ri = wp.mat33(0.0)
@@ -336,16 +332,22 @@ def warm_start_pair_side(
     if reset_reference == 0:
         x_i = solver.solver_ref_pos[i]
         x_j = solver.solver_ref_pos[j]
-        rot_i = solver.solver_ref_rot[i]
-        rot_j = solver.solver_ref_rot[j]
         drift_pi = solver.solver_drift_p[i]
         drift_pj = solver.solver_drift_p[j]
         drift_ri = solver.solver_drift_r[i]
         drift_rj = solver.solver_drift_r[j]
     for k in range(pairs.pair_point_count[p]):
         slot = p * POINTS + k
-        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot], x_i, x_j,
-                             drift_pi, drift_pj, drift_ri, drift_rj, rot_i, rot_j, i, j, model)
+        # (the rotations the anchors turn from: the step's start where the pose is being reset)
+        now = PairPoint()
+        if reset_reference == 0:
+            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
+                                 pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj,
+                                 solver.solver_ref_rot, i, j, model)
+        else:
+            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
+                                 pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj,
+                                 state_in.body_rot, i, j, model)
         arm = wp.where(side == 0, now.arm_i, now.arm_j)
         impulse = sign * (pairs.pair_normal_impulse[slot] * now.normal + pairs.pair_tangent_impulse[slot])
         v = v + inv_mass * impulse
