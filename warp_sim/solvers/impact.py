@@ -89,7 +89,8 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
-from .impact_point import coulomb_step, engage_speed, engaged, spheres_touch_time, time_to_contact
+from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, gravity_kick, spheres_touch_time,
+                           time_to_contact)
 from .impact_terrain import (IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED,
                              impact_terrain)
 from .pair_geometry import NO_CONTACT, pair_point_now, read_pair_velocity
@@ -266,7 +267,7 @@ def impact_pair_velocity(
     bounces = int(0)
     toi = settings.h
     # the relative speed the substep's gravity adds (dynamic bodies only)
-    kick = settings.h * (wp.where(inv_mi > 0.0, 1.0, 0.0) - wp.where(inv_mj > 0.0, 1.0, 0.0)) * settings.gravity
+    kick = gravity_kick(inv_mi, inv_mj, settings.gravity, settings.h)
     for k in range(count):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
@@ -302,20 +303,19 @@ def impact_pair_velocity(
     sphere_box = (radius_i > 0.0) != (radius_j > 0.0)
     turns_i = wp.where(radius_i > 0.0, 0.0, 1.0)  # a sphere's anchor does not turn (soft_step.drift_rotation)
     turns_j = wp.where(radius_j > 0.0, 0.0, 1.0)
-    ident = wp.identity(n=3, dtype=float)
     for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
         at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS],
                             pairs.pair_feature[p * POINTS], xi, xj, dpi + toi * vi, dpj + toi * vj,
-                            dri + (turns_i * toi) * wp.skew(wi) * (ident + dri),
-                            drj + (turns_j * toi) * wp.skew(wj) * (ident + drj), solver.solver_ref_rot, i, j, model)
+                            drift_turned(dri, wi, toi, turns_i), drift_turned(drj, wj, toi, turns_j),
+                            solver.solver_ref_rot, i, j, model)
         vn_at = wp.dot(vi + wp.cross(wi, at.arm_i) - vj - wp.cross(wj, at.arm_j), at.normal)
         if at.separation == NO_CONTACT or wp.abs(at.separation) <= TOI_GAP_TOLERANCE or vn_at >= 0.0:
             break
         toi = wp.clamp(toi + at.separation / -vn_at, 0.0, settings.h)
     dpi_t = dpi + toi * vi
     dpj_t = dpj + toi * vj
-    dri_t = dri + (turns_i * toi) * wp.skew(wi) * (ident + dri)
-    drj_t = drj + (turns_j * toi) * wp.skew(wj) * (ident + drj)
+    dri_t = drift_turned(dri, wi, toi, turns_i)
+    drj_t = drift_turned(drj, wj, toi, turns_j)
     normal = wp.mat44(0.0)
     arm_i = wp.mat44(0.0)
     arm_j = wp.mat44(0.0)
@@ -529,8 +529,7 @@ def pair_contact_times(
                              solver.solver_drift_p[i], solver.solver_drift_p[j], solver.solver_drift_r[i],
                              solver.solver_drift_r[j], solver.solver_ref_rot, i, j, model)
         vn = wp.dot(vel.vi + wp.cross(vel.wi, now.arm_i) - vel.vj - wp.cross(vel.wj, now.arm_j), now.normal)
-        kick = settings.h * (wp.where(model.body_inv_mass[i] > 0.0, 1.0, 0.0)
-                             - wp.where(model.body_inv_mass[j] > 0.0, 1.0, 0.0)) * settings.gravity
+        kick = gravity_kick(model.body_inv_mass[i], model.body_inv_mass[j], settings.gravity, settings.h)
         if (engaged(now.separation, vn + wp.dot(kick, now.normal), settings.h)
                 and vn < -engage_speed(settings.gravity, settings.h)):
             toi = time_to_contact(now.separation, vn, toi)

@@ -55,6 +55,21 @@ def time_to_contact(gap: float, vn: float, toi: float) -> float:
 
 
 @wp.func
+def gravity_kick(inv_mass_i: float, inv_mass_j: float, gravity: wp.vec3, h: float) -> wp.vec3:
+    """The relative velocity (i minus j) the substep's kick adds: gravity acts on dynamic bodies
+    only.  A contact is engaged on the speed it leaves (impact.py), so one closed by the kick alone
+    is an impact too."""
+    return h * (wp.where(inv_mass_i > 0.0, 1.0, 0.0) - wp.where(inv_mass_j > 0.0, 1.0, 0.0)) * gravity
+
+
+@wp.func
+def drift_turned(drift_r: wp.mat33, w: wp.vec3, t: float, turns: float) -> wp.mat33:
+    """An anchor drift (soft_step.drift_rotation) carried on by a turn at w for a time t; ``turns``
+    0 for a sphere, whose support point does not turn."""
+    return drift_r + (turns * t) * wp.skew(w) * (wp.identity(n=3, dtype=float) + drift_r)
+
+
+@wp.func
 def spheres_touch_time(d: wp.vec3, dv: wp.vec3, reach: float, h: float, toi: float) -> float:
     """When two spheres whose centres are ``d`` apart (i minus j), closing at the relative velocity
     ``dv``, touch: the earlier root of |d + t dv| = reach (their radii summed), exact for straight

@@ -161,17 +161,13 @@ def pair_point_now(
     # a sphere found at a box's edge or corner (its stored normal turns as it moves; a face's
     # stays the face's): its contact found again here
     if (sphere_radius_i > 0.0) != (sphere_radius_j > 0.0) and feature >= BOX_EDGE_ID:
-        ident = wp.identity(n=3, dtype=float)
-        found = PairPoint()
+        sphere_is_i = sphere_radius_i > 0.0
+        box = wp.where(sphere_is_i, j, i)
         radius = wp.max(sphere_radius_i, sphere_radius_j)
-        if sphere_radius_i > 0.0:
-            found = sphere_box_point(x_ref_i + drift_p_i, sphere_radius_i, x_ref_j + drift_p_j,
-                                     (ident + drift_r_j) * rot_ref[j], model.body_size[j], model.body_covered_faces[j],
-                                     True)
-        else:
-            found = sphere_box_point(x_ref_j + drift_p_j, sphere_radius_j, x_ref_i + drift_p_i,
-                                     (ident + drift_r_i) * rot_ref[i], model.body_size[i], model.body_covered_faces[i],
-                                     False)
+        found = sphere_box_point(wp.where(sphere_is_i, x_ref_i + drift_p_i, x_ref_j + drift_p_j), radius,
+                                 wp.where(sphere_is_i, x_ref_j + drift_p_j, x_ref_i + drift_p_i),
+                                 (wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drift_r_j, drift_r_i))
+                                 * rot_ref[box], model.body_size[box], model.body_covered_faces[box], sphere_is_i)
         # only while the centre is outside the box and on the stored normal's side: a centre that
         # has sunk into a thin box past its middle finds the far face nearest, and would be pushed
         # on through it (a ball struck at 40 m/s into a 4 cm wall went through); the stored
