@@ -103,6 +103,20 @@ NO_CONTACT = 1.0e30  # the separation of a sphere-box pair whose contact has gon
 
 
 @wp.func
+def orthonormalized(m: wp.mat33) -> wp.mat33:
+    """The rotation nearest a first-order turned one, (1 + D) R: Gram-Schmidt on its columns.  A
+    box turned on by t w from its drift (impact_point.drift_turned) is stretched by
+    1 + (t |w|)^2 / 2, and a face normal taken from it was as much over unit length: the impact's
+    friction then read the normal speed left in v - (v . n) n as slip and pushed the bodies apart
+    through it (a ball glancing off a box spinning at 8 rad/s, 7 % of the pair's energy gained)."""
+    a = wp.normalize(wp.vec3(m[0, 0], m[1, 0], m[2, 0]))
+    b = wp.vec3(m[0, 1], m[1, 1], m[2, 1])
+    b = wp.normalize(b - wp.dot(a, b) * a)
+    c = wp.cross(a, b)
+    return wp.matrix_from_cols(a, b, c)
+
+
+@wp.func
 def sphere_box_point(
     c_sphere: wp.vec3,
     radius: float,
@@ -166,8 +180,9 @@ def pair_point_now(
         radius = wp.max(sphere_radius_i, sphere_radius_j)
         found = sphere_box_point(wp.where(sphere_is_i, x_ref_i + drift_p_i, x_ref_j + drift_p_j), radius,
                                  wp.where(sphere_is_i, x_ref_j + drift_p_j, x_ref_i + drift_p_i),
-                                 (wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drift_r_j, drift_r_i))
-                                 * rot_ref[box], model.body_size[box], model.body_covered_faces[box], sphere_is_i)
+                                 orthonormalized((wp.identity(n=3, dtype=float)
+                                                  + wp.where(sphere_is_i, drift_r_j, drift_r_i)) * rot_ref[box]),
+                                 model.body_size[box], model.body_covered_faces[box], sphere_is_i)
         # only while the centre is outside the box and on the stored normal's side: a centre that
         # has sunk into a thin box past its middle finds the far face nearest, and would be pushed
         # on through it (a ball struck at 40 m/s into a 4 cm wall went through); the stored
