@@ -441,6 +441,7 @@ class Simulator:
         self.body_bad_step.fill_(-1)
         self.bad_count.zero_()
         self.solver.sim_step.zero_()
+        self.solver.solver_support.zero_()
         if self.sleep is not None:
             self.sleep.wake_all()
         self.step_count = 0
@@ -459,7 +460,7 @@ class Simulator:
         c = self.contacts
         arrays = [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                   c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                  c.terrain_contact_surface, self.solver.sim_step]
+                  c.terrain_contact_surface, self.solver.sim_step, self.solver.solver_support]
         if self.sleep is not None:
             arrays += [self.sleep.body_sleep_timer, self.sleep.body_sleep_speed, self.sleep.body_sleep_rise,
                        self.sleep.body_inv_mass_awake]

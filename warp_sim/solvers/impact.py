@@ -89,8 +89,8 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
-from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, gravity_kick, spheres_touch_time,
-                           time_to_contact)
+from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, free_fall_share, gravity_kick,
+                           spheres_touch_time, time_to_contact)
 from .impact_terrain import (IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED,
                              impact_terrain)
 from .pair_geometry import NO_CONTACT, pair_point_now, read_pair_velocity
@@ -266,8 +266,10 @@ def impact_pair_velocity(
     hit = int(0)
     bounces = int(0)
     toi = settings.h
-    # the relative speed the substep's gravity adds (dynamic bodies only)
-    kick = gravity_kick(inv_mi, inv_mj, settings.gravity, settings.h)
+    # the relative speed the substep's gravity adds: to dynamic bodies, less what their contacts hold
+    fall_i = free_fall_share(inv_mi, solver.solver_support[i])
+    fall_j = free_fall_share(inv_mj, solver.solver_support[j])
+    kick = gravity_kick(fall_i, fall_j, settings.gravity, settings.h)
     for k in range(count):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
@@ -329,9 +331,10 @@ def impact_pair_velocity(
             normal[k, axis] = at.normal[axis]
             arm_i[k, axis] = at.arm_i[axis]
             arm_j[k, axis] = at.arm_j[axis]
-    # the impact acts at t*, on the velocities gravity has grown by then (dynamic bodies only)
-    gi = wp.where(inv_mi > 0.0, toi, 0.0) * settings.gravity
-    gj = wp.where(inv_mj > 0.0, toi, 0.0) * settings.gravity
+    # the impact acts at t*, on the velocities gravity has grown by then: a resting body's contacts
+    # hold it (staged.support_share), a falling one has gained g t*
+    gi = (fall_i * toi) * settings.gravity
+    gj = (fall_j * toi) * settings.gravity
     vi = vi + gi
     vj = vj + gj
     vi_in = vi
@@ -523,13 +526,14 @@ def pair_contact_times(
     j = ij[1]
     vel = read_pair_velocity(solver, i, j)
     toi = settings.h
+    kick = gravity_kick(free_fall_share(model.body_inv_mass[i], solver.solver_support[i]),
+                        free_fall_share(model.body_inv_mass[j], solver.solver_support[j]), settings.gravity, settings.h)
     for k in range(pairs.pair_point_count[p]):
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
                              pairs.pair_feature[p * POINTS + k], solver.solver_ref_pos[i], solver.solver_ref_pos[j],
                              solver.solver_drift_p[i], solver.solver_drift_p[j], solver.solver_drift_r[i],
                              solver.solver_drift_r[j], solver.solver_ref_rot, i, j, model)
         vn = wp.dot(vel.vi + wp.cross(vel.wi, now.arm_i) - vel.vj - wp.cross(vel.wj, now.arm_j), now.normal)
-        kick = gravity_kick(model.body_inv_mass[i], model.body_inv_mass[j], settings.gravity, settings.h)
         if (engaged(now.separation, vn + wp.dot(kick, now.normal), settings.h)
                 and vn < -engage_speed(settings.gravity, settings.h)):
             toi = time_to_contact(now.separation, vn, toi)

@@ -55,11 +55,18 @@ def time_to_contact(gap: float, vn: float, toi: float) -> float:
 
 
 @wp.func
-def gravity_kick(inv_mass_i: float, inv_mass_j: float, gravity: wp.vec3, h: float) -> wp.vec3:
-    """The relative velocity (i minus j) the substep's kick adds: gravity acts on dynamic bodies
-    only.  A contact is engaged on the speed it leaves (impact.py), so one closed by the kick alone
-    is an impact too."""
-    return h * (wp.where(inv_mass_i > 0.0, 1.0, 0.0) - wp.where(inv_mass_j > 0.0, 1.0, 0.0)) * gravity
+def free_fall_share(inv_mass: float, support: float) -> float:
+    """The share of gravity that moves a body within the substep: none for a static body, and for a
+    dynamic one what its contacts do not hold (staged.support_share: 0 falling, 1 resting)."""
+    return wp.where(inv_mass > 0.0, 1.0 - support, 0.0)
+
+
+@wp.func
+def gravity_kick(fall_i: float, fall_j: float, gravity: wp.vec3, h: float) -> wp.vec3:
+    """The relative velocity (i minus j) the substep's kick leaves, the bodies falling by the shares
+    ``fall`` (free_fall_share).  A contact is engaged on the speed it leaves (impact.py), so one
+    closed by the kick alone is an impact too."""
+    return h * (fall_i - fall_j) * gravity
 
 
 @wp.func

@@ -93,6 +93,8 @@ class SoftStepSolver:
         self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
         # when the earliest of a body's pairs closes within the substep (impact.pair_contact_times)
         self.solver_pair_toi = wp.zeros(n, dtype=float, device=device)
+        # the share of gravity each body's contacts held in the last substep (staged.support_share)
+        self.solver_support = wp.zeros(n, dtype=float, device=device)
 
     def _soft(self, dt: float):
         # one vec4 object per dt, so recorded launches see an unchanged argument
