@@ -10,7 +10,7 @@ import pytest
 from warp_sim import ModelBuilder, SimConfig, Simulator
 from warp_sim.builder import Material
 from warp_sim.column_sag import contact_omega
-from warp_sim.terrain import FourierTerrain, PlaneTerrain
+from warp_sim.terrain import FourierTerrain, NoTerrain, PlaneTerrain
 
 G = 9.81
 
@@ -22,15 +22,18 @@ def simulator(builder, device="cpu", **config):
 @pytest.mark.parametrize("mass_a, mass_b", [(1.0, 1.0), (100.0, 1.0), (1.0, 100.0), (2.0, 3.0)])
 @pytest.mark.parametrize("restitution", [1.0, 0.5])
 def test_a_sleeping_body_takes_part_in_the_step_it_is_hit(mass_a, mass_b, restitution, device):
-    """Zero gravity, mu 0: ball A strikes ball B, which has fallen asleep.  The outcome is the
-    two-body impact's, v_A' = (m_A - e m_B) v / (m_A + m_B), v_B' = (1 + e) m_A v / (m_A + m_B),
-    momentum exact: a sleeping body is no wall.  B sleeps from t = 0.5 s, A arrives at 2/3 s; the
-    velocities are read at 1 s, before a slow B (under sleep_velocity) could fall asleep again."""
+    """On a frictionless plane (mu 0: no spin, the balls slide), ball A strikes ball B, which has
+    fallen asleep resting there.  The outcome is the two-body impact's, v_A' = (m_A - e m_B) v /
+    (m_A + m_B), v_B' = (1 + e) m_A v / (m_A + m_B), momentum along x exact: a sleeping body is
+    no wall.  B sleeps from t = 0.5 s, A arrives at 2/3 s; the velocities are read at 1 s, before
+    a slow B (under sleep_velocity) could fall asleep again.  (Without gravity nothing sleeps,
+    sleep.py, so the plane and gravity hold B for its sleep.)"""
     speed = 3.0
     b = ModelBuilder(Material(restitution=restitution, friction=0.0))
-    b.add_sphere(0.5, mass_a, position=(-3.0, 0.0, 0.0), velocity=(speed, 0.0, 0.0))
-    b.add_sphere(0.5, mass_b, position=(0.0, 0.0, 0.0))
-    sim = simulator(b, device, gravity=(0.0, 0.0, 0.0), sleep=True)
+    b.set_terrain(PlaneTerrain())
+    b.add_sphere(0.5, mass_a, position=(-3.0, 0.5, 0.0), velocity=(speed, 0.0, 0.0))
+    b.add_sphere(0.5, mass_b, position=(0.0, 0.5, 0.0))
+    sim = simulator(b, device, sleep=True)
     slept = False
     for _ in range(60):
         sim.step()
@@ -398,3 +401,40 @@ def test_bodies_at_rest_still_fall_asleep_in_sleep_time(shape, mass, size, tilt,
     sim = simulator(b, device)
     sim.step(60)
     assert sim.sleep.awake_count() == 0
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box", "two boxes"])
+@pytest.mark.parametrize("speed", [0.01, 0.03, 0.049])
+@pytest.mark.parametrize("gravity", [0.0, 0.005])
+def test_bodies_drifting_without_gravity_stay_awake_and_keep_their_momentum(shape, speed, gravity, device):
+    """Zero gravity (and gravity weaker than the rise rule's a_rise = 0.01 m/s^2), sleeping on: a
+    body, or two touching cubes, drifting slower than sleep_velocity is free, not at rest, and
+    travels v t.  A slow free body is told from a resting one by nothing the sleep timers read
+    without gravity, so none sleeps there (sleep.py); before, a box at 0.049 m/s fell asleep after
+    sleep_time and stopped, its momentum zeroed.  Tolerance: free flight is exact but for float32
+    rounding of positions of order 1 m (1e-6), plus the weak gravity's g t^2 / 2 along y."""
+    b = ModelBuilder(Material(restitution=0.0, friction=0.5))
+    b.set_terrain(NoTerrain())
+    if shape == "sphere":
+        b.add_sphere(0.25, 1.0, position=(0.0, 0.0, 0.0), velocity=(speed, 0.0, 0.0))
+    else:
+        b.add_box((0.25, 0.25, 0.25), 1.0, position=(0.0, 0.0, 0.0), velocity=(speed, 0.0, 0.0))
+        if shape == "two boxes":
+            b.add_box((0.25, 0.25, 0.25), 2.0, position=(0.5, 0.0, 0.0), velocity=(speed, 0.0, 0.0))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, -gravity, 0.0), device=device))
+    seconds = 2.0
+    sim.step(int(round(seconds / sim.config.dt)))
+    x = sim.state.body_pos.numpy()[0].astype(float)
+    assert x[0] == pytest.approx(speed * seconds, abs=1e-5)
+    assert sim.awake_count() == sim.model.body_count
+
+
+def test_resting_bodies_still_sleep_under_gravity_as_weak_as_the_rise_floor(device):
+    """The guard of the rule above: a cube at rest on the plane under g = 0.02 m/s^2 (twice a_rise)
+    sleeps within sleep_time and a step."""
+    b = ModelBuilder(Material(restitution=0.0, friction=0.5))
+    b.set_terrain(PlaneTerrain())
+    b.add_box((0.25, 0.25, 0.25), 1.0, position=(0.0, 0.25, 0.0))
+    sim = Simulator(b.finalize(device), SimConfig(gravity=(0.0, -0.02, 0.0), device=device))
+    sim.step(int(math.ceil(sim.config.sleep_time / sim.config.dt)) + 2)
+    assert sim.awake_count() == 0

@@ -126,7 +126,8 @@ class Simulator:
         self.sleep = None
         self.physics_model = model
         if config.sleep and dynamic >= 1:
-            self.sleep = Sleep(model, config.sleep_velocity, config.sleep_time, self.device)
+            self.sleep = Sleep(model, config.sleep_velocity, config.sleep_time, self.device,
+                               float(np.linalg.norm(config.gravity)))
             self.physics_model = AwakeModel(model, self.sleep.body_inv_mass_awake)
         self.pairs = None
         self._color_sizes = None
@@ -526,6 +527,10 @@ class Simulator:
         self.substep_plan = plan_substeps(self.model, self.config, self.state)
         self.substeps = self.substep_plan.substeps
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
+        if self.sleep is not None:
+            self.sleep.gravity_magnitude = self._gravity_magnitude
+            self.sleep.sleep_velocity = self.config.sleep_velocity
+            self.sleep.sleep_time = self.config.sleep_time
         self.solver = make_solver(self._solver_settings(), self.config.gravity, self.device, self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
         self.wake_all()

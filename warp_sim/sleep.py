@@ -11,6 +11,10 @@ Box2D v3 puts whole islands to sleep.  Here the same rule is reached without bui
   defaults: a ball rolling down a 0.3 degree slope, a = 0.037 m/s^2, slept after 4.6 mm).  A
   settling body's speed falls or jitters; it does not rise for 15 steps running.  What is left:
   bodies accelerating under a_rise (0.01 m/s^2 at the defaults) still fall asleep;
+* nothing sleeps where gravity is weaker than a_rise (zero gravity): a slow body is then told from
+  a resting one by nothing the timers see, and a free body drifting at 0.049 m/s fell asleep
+  after sleep_time, its momentum zeroed (two touching cubes drifting together alike).  Under
+  gravity a body no contact holds accelerates at g and the rise rule keeps it awake;
 * a body sleeps when its own timer and those of all the dynamic bodies it touches have passed
   ``sleep_time``; so a pile sleeps when all of it has been still, as an island would;
 * a sleeping body that touches a body whose timer is short wakes up with its timer reset, and
@@ -137,6 +141,7 @@ def update_sleep(
     sleep_velocity: float,
     sleep_time: float,
     sleep_rise_step: float,
+    settle: int,
     # State in/out
     body_rot: wp.array(dtype=wp.mat33),
     body_vel: wp.array(dtype=wp.vec3),
@@ -165,7 +170,7 @@ def update_sleep(
     body_sleep_speed[i] = speed
     body_sleep_rise[i] = rise
     timer = body_sleep_timer[i]
-    if speed < sleep_velocity and rise < 0.5 * sleep_time:
+    if settle != 0 and speed < sleep_velocity and rise < 0.5 * sleep_time:
         timer = timer + dt
     else:
         timer = 0.0
@@ -183,11 +188,12 @@ def update_sleep(
 
 
 class Sleep:
-    def __init__(self, model, sleep_velocity: float, sleep_time: float, device):
+    def __init__(self, model, sleep_velocity: float, sleep_time: float, device, gravity_magnitude: float = 9.81):
         self.model = model
         self.device = device
         self.sleep_velocity = sleep_velocity
         self.sleep_time = sleep_time
+        self.gravity_magnitude = gravity_magnitude
         n = max(model.body_count, 1)
         self.body_sleep_timer = wp.zeros(n, dtype=float, device=device)
         self.body_sleep_speed = wp.zeros(n, dtype=float, device=device)  # the speed of the last update
@@ -222,9 +228,14 @@ class Sleep:
                 self.body_sleep_timer, self.body_neighbour_timer])  # atomics: never split (see above)
         launch(update_sleep, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_bound_radius, dt, self.sleep_velocity, self.sleep_time,
-            SLEEP_RISE_FRACTION * self.sleep_velocity / self.sleep_time * dt, state.body_rot, state.body_vel,
+            self.rise_acceleration() * dt, int(self.gravity_magnitude >= self.rise_acceleration()), state.body_rot,
+            state.body_vel,
             state.body_angmom, self.body_sleep_timer, self.body_sleep_speed, self.body_sleep_rise,
             self.body_neighbour_timer, self.body_inv_mass_awake], device=self.device)
+
+    def rise_acceleration(self) -> float:
+        """a_rise: the smallest steady acceleration the rise rule keeps awake (module docstring)."""
+        return SLEEP_RISE_FRACTION * self.sleep_velocity / self.sleep_time
 
     def wake_all(self):
         self.body_sleep_timer.zero_()
