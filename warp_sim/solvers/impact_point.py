@@ -94,6 +94,22 @@ def spheres_touch_time(d: wp.vec3, dv: wp.vec3, reach: float, h: float, toi: flo
 
 
 @wp.func
+def spheres_miss(d: wp.vec3, dv: wp.vec3, reach: float, h: float, margin: float) -> bool:
+    """Whether two spheres whose centres are ``d`` apart (i minus j), moving at the relative velocity
+    ``dv``, pass each other within the substep without touching: their straight paths' closest
+    approach over [0, h] stays more than ``margin`` beyond reach (``margin``: what the substep's
+    gravity kick may bend the paths by).  The gap along the start's line of centres, which the
+    engagement and the speculative rows read, closes for a ball flying past another too: a ball
+    at two diameters a step passing 5 % of a diameter clear knocked the other away at 0.12 of its
+    speed (0.31 at five diameters a step)."""
+    a = wp.dot(dv, dv)
+    t = float(0.0)
+    if a > 0.0:
+        t = wp.clamp(-wp.dot(d, dv) / a, 0.0, h)
+    return wp.length(d + t * dv) > reach + margin
+
+
+@wp.func
 def coulomb_step(old_t: wp.vec3, vt: wp.vec3, k_t: float, limit: float) -> wp.vec3:
     """The accumulated tangential impulse after pushing against the slip vt, clamped to the disc."""
     new_t = old_t

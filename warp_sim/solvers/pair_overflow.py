@@ -47,7 +47,7 @@ import warp as wp
 from ..kernel_args import BodyModel, PairContacts
 from ..launch import launch
 from ..schedule.coloring import COLOR_COUNT
-from .impact import impact_pair_velocity, unchanged_since
+from .impact import OTHER_EVENT, impact_pair_velocity, unchanged_since
 from .pair_solve import MODE_IMPACT, MODE_WARM_START, read_pair_velocity, solve_pair_points
 from .solver_args import SolverBodies, StepSettings
 
@@ -205,7 +205,8 @@ def overflow_impact_pass(
 ):
     """One impact sweep of every overflow pair (impact.impact_pair's, with split masses): velocity
     changes and time-of-impact shifts summed per body, and per body 1 if a pair struck it.  Stamps are read as the
-    sweep before left them and written by overflow_impact_apply."""
+    sweep before left them and written by overflow_impact_apply.  Bodies struck here get the
+    event partner OTHER_EVENT (in overflow_impact_apply): a split pair's impact is no one pair's."""
     t = wp.tid()
     for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
         p = color_pairs_sorted[index]
@@ -253,9 +254,10 @@ def overflow_impact_apply(
     solver_w: wp.array(dtype=wp.vec3),
     solver_toi_shift: wp.array(dtype=wp.vec3),
     solver_impact_stamp: wp.array(dtype=wp.int32),
+    solver_event_partner: wp.array(dtype=wp.int32),
 ):
     """Each struck body's summed impact applied by its owner pair, as impact_pair writes one: the
-    sweep's stamp, and the shift added to the body's."""
+    sweep's stamp, and the shift added to the body's; its event is no one pair's (OTHER_EVENT)."""
     t = wp.tid() + tid_offset
     for index in range(color_start[COLOR_COUNT] + t, color_start[COLOR_COUNT + 1], OVERFLOW_THREADS):
         p = color_pairs_sorted[index]
@@ -268,6 +270,7 @@ def overflow_impact_apply(
                 shift = take_fixed(solver_overflow_shift, 3 * b)
                 solver_toi_shift[b] = solver_toi_shift[b] + shift
                 solver_impact_stamp[b] = impact_sweep
+                solver_event_partner[b] = OTHER_EVENT
                 solver_overflow_hit[b] = 0
 
 
@@ -328,7 +331,7 @@ class OverflowPairs:
                 impact_sweep, contacts.color_start, contacts.color_pairs_sorted, contacts.pair_body,
                 self.solver_overflow_owner, self.solver_overflow_velocity, self.solver_overflow_shift,
                 self.solver_overflow_hit, solver_v, solver_w, solver_args.solver_toi_shift,
-                solver_args.solver_impact_stamp])
+                solver_args.solver_impact_stamp, solver_args.solver_event_partner])
             return
         for _ in range(1 if mode == MODE_WARM_START else OVERFLOW_ITERATIONS):
             wp.launch(overflow_pair_pass, dim=dim, device=self.device, inputs=[

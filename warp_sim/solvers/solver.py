@@ -93,6 +93,9 @@ class SoftStepSolver:
         self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
         # when the earliest of a body's pairs closes within the substep (impact.pair_contact_times)
         self.solver_pair_toi = wp.zeros(n, dtype=float, device=device)
+        # when and with whom each body's last impact of the substep struck (impact.pair_event_start)
+        self.solver_event_time = wp.zeros(n, dtype=float, device=device)
+        self.solver_event_partner = wp.full(n, -1, dtype=wp.int32, device=device)
         # the share of gravity each body's contacts held in the last substep (staged.support_share)
         self.solver_support = wp.zeros(n, dtype=float, device=device)
 

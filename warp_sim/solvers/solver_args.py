@@ -46,6 +46,8 @@ class SolverBodies:
     solver_toi_shift: wp.array(dtype=wp.vec3)
     solver_impact_stamp: wp.array(dtype=wp.int32)
     solver_pair_toi: wp.array(dtype=float)  # the earliest time a pair of the body closes this substep (impact.py)
+    solver_event_time: wp.array(dtype=float)  # when the body's last impact of the substep struck (impact.pair_event_start)
+    solver_event_partner: wp.array(dtype=wp.int32)  # with which body (NO_EVENT, OTHER_EVENT: impact.py)
     solver_support: wp.array(dtype=float)  # share of gravity the last substep's solve held (staged.support_share)
     terrain_row_slot: wp.array(dtype=wp.int32)
     terrain_row_count: wp.array(dtype=wp.int32)
