@@ -73,6 +73,15 @@ kept until it is measured again on 15 layouts a setting.
 
 A gap is the centre distance less the two bodies' volume-equivalent radii (the sphere's radius,
 the box's cube-root mean half extent).  A stack that starts touching has no gaps and no landing.
+
+Budgets scale with the bodies.  The sag of a column is a length fixed by g / omega^2, whatever the
+size of its bodies, so budgets in metres alone let small bodies sink by a large share of
+themselves: ten 1 cm cubes were planned at 4 substeps for a 6.9 mm sag, under the 7.5 mm
+``column_sag``, and the column fell over (5 cm cubes sank 13 % of a cube).  The budgets the plan
+keeps are therefore the smaller of the settings and a share of the scene's median body thickness
+(its thinnest dimension: a sphere's diameter, a box's smallest side): SAG_SHARE and
+LANDING_SHARE are the shares the settings are of the plates' 0.2 m thickness, where they were
+calibrated (the table above), so bodies 0.2 m thick or more plan as before.
 """
 
 from __future__ import annotations
@@ -87,6 +96,10 @@ from .types import SHAPE_SPHERE
 MAX_AUTO_SUBSTEPS = 64
 LANDING_RESIDUAL = 0.69  # deepest transient / (v h) of a pile landed on, worst measured (module docstring)
 LANDING_PILE = 3  # bodies in a column from which a landing counts
+# the budgets as shares of the median body thickness (module docstring: the plates' 0.2 m, on which
+# column_sag = 7.5 mm and landing_depth = 1 cm were calibrated)
+SAG_SHARE = 0.0375
+LANDING_SHARE = 0.05
 
 
 def contact_hertz(h: float, setting: float | None) -> float:
@@ -107,10 +120,10 @@ class SubstepPlan:
     column_bodies: int  # bodies in the column of the largest sag
     sag_requested: float  # that column's estimated sag at the requested substeps [m]
     sag: float  # ... at the substeps run [m]
-    budget: float  # SimConfig.column_sag [m]
+    budget: float  # SimConfig.column_sag, or less for small bodies (plan_budgets) [m]
     auto: bool
     landing_speed: float = 0.0  # [m/s] the fastest landing on a pile the scene starts with
-    landing_depth: float = 0.01  # SimConfig.landing_depth [m]
+    landing_depth: float = 0.01  # SimConfig.landing_depth, or less for small bodies (plan_budgets) [m]
     landing_dt: float = 0.0  # the step dt the landing was planned for [s]
     raised_by: str = ""  # "sag" or "landing": the budget the last substep added was for
 
@@ -271,6 +284,25 @@ def volume_radius(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
     return np.where(shape == SHAPE_SPHERE, size[:, 0], box)
 
 
+def body_thickness(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """A body's thinnest dimension: a sphere's diameter, a box's smallest side."""
+    return 2.0 * np.where(shape == SHAPE_SPHERE, size[:, 0], np.min(np.abs(size), axis=1))
+
+
+def plan_budgets(model, config) -> tuple[float, float]:
+    """The column sag and landing depth the plan keeps [m]: the settings, or SAG_SHARE and
+    LANDING_SHARE of the median dynamic body's thickness where those are smaller (module
+    docstring)."""
+    host = model.host
+    dynamic = host["body_inv_mass"] > 0
+    if not np.any(dynamic):
+        return float(config.column_sag), float(config.landing_depth)
+    thickness = float(np.median(body_thickness(host["body_shape"][dynamic],
+                                               np.asarray(host["body_size"], dtype=np.float64)[dynamic])))
+    return (min(float(config.column_sag), SAG_SHARE * thickness),
+            min(float(config.landing_depth), LANDING_SHARE * thickness))
+
+
 def plan_substeps(model, config, state=None) -> SubstepPlan:
     """The substeps to run for ``config`` on ``model``, its bodies posed as in ``state`` (default:
     as the model places them)."""
@@ -278,6 +310,7 @@ def plan_substeps(model, config, state=None) -> SubstepPlan:
     g = float(np.linalg.norm(config.gravity))
     host = model.host
     dynamic = host["body_inv_mass"] > 0
+    sag_budget, landing_budget = plan_budgets(model, config)
     terms, count, fall = 0.0, 0, 0.0
     if g > 0.0 and config.body_contact and np.count_nonzero(dynamic) >= 2:
         up = -np.asarray(config.gravity, dtype=np.float64) / g
@@ -301,12 +334,12 @@ def plan_substeps(model, config, state=None) -> SubstepPlan:
     chosen, raised_by = requested, ""
     if config.auto_substeps:
         while chosen < MAX_AUTO_SUBSTEPS:
-            if landing_transient(speed, config.dt, chosen) > config.landing_depth:
+            if landing_transient(speed, config.dt, chosen) > landing_budget:
                 raised_by = "landing"
-            elif sag(chosen) > config.column_sag:
+            elif sag(chosen) > sag_budget:
                 raised_by = "sag"
             else:
                 break
             chosen += 1
-    return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), config.column_sag,
-                       bool(config.auto_substeps), speed, float(config.landing_depth), float(config.dt), raised_by)
+    return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), sag_budget,
+                       bool(config.auto_substeps), speed, landing_budget, float(config.dt), raised_by)

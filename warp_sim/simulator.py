@@ -478,11 +478,12 @@ class Simulator:
     def _solver_settings(self) -> SolverSettings:
         """The config's solver settings, with the depth past which a contact is pushed back within
         the substep (contact_rows.closed_contact_bias): the column sag the substep plan runs with,
-        never under the column_sag budget.  With auto_substeps off a column may be planned to sag
-        past the budget, and pushing its loaded contacts back would fight the load (a 1 kg cube
-        under 1000 kg at 4 substeps, planned at 138 mm, was thrown out)."""
+        never under the plan's sag budget (column_sag, or less for small bodies:
+        column_sag.plan_budgets).  With auto_substeps off a column may be planned to sag past the
+        budget, and pushing its loaded contacts back would fight the load (a 1 kg cube under
+        1000 kg at 4 substeps, planned at 138 mm, was thrown out)."""
         return dataclasses.replace(self.config.solver_settings(),
-                                   soft_depth=max(self.config.column_sag, self.substep_plan.sag))
+                                   soft_depth=max(self.substep_plan.budget, self.substep_plan.sag))
 
     def set_terrain(self, terrain):
         """Replace the terrain the bodies collide with (GUI edits); takes effect next step."""
