@@ -17,7 +17,8 @@ import pytest
 
 from warp_sim import ModelBuilder, PlaneTerrain, SimConfig, Simulator
 from warp_sim.builder import Material
-from warp_sim.column_sag import LANDING_RESIDUAL, MAX_AUTO_SUBSTEPS, SAG_SHARE, contact_omega, plan_substeps
+from warp_sim.column_sag import (CALIBRATION_THICKNESS, LANDING_RESIDUAL, MAX_AUTO_SUBSTEPS, contact_omega,
+                                 plan_substeps)
 
 G = 9.81
 
@@ -186,15 +187,16 @@ def test_a_column_of_small_cubes_stands_at_the_defaults(side, count, masses, dev
     """Cubes of 1 to 5 cm stacked on the plane, masses equal or random (0.2 to 5 kg), sleeping off.
     A column's sag is a length fixed by g / omega^2 whatever its bodies' size, so the 7.5 mm
     budget alone let ten 1 cm cubes sag 69 % of a cube at the 4 substeps it planned, and the
-    column fell over (5 cm cubes sank 13 % of a cube).  The plan's budget is now also SAG_SHARE
-    of the median body's thickness (column_sag.plan_budgets): the top sinks by the estimate, at
-    most that share of a cube, and moves sideways under 1 % of a cube (float32 positions of a
-    1 cm column round at 1e-9 m)."""
+    column fell over (5 cm cubes sank 13 % of a cube).  The plan scales the budget by the median
+    body's thickness over the 0.2 m it holds for (column_sag.plan_budgets): the top sinks by the
+    estimate, at most 3.75 % of a cube, and moves sideways under 1 % of a cube (float32 positions
+    of a 1 cm column round at 1e-9 m)."""
     rng = np.random.default_rng(count)
     weights = np.ones(count) if masses == "equal" else rng.uniform(0.2, 5.0, count)
     sim = box_column([(side / 2,) * 3] * count, weights, device=device)
     plan = sim.substep_plan
-    assert plan.budget == pytest.approx(SAG_SHARE * side) and plan.sag <= plan.budget
+    assert plan.budget == pytest.approx(sim.config.column_sag * side / CALIBRATION_THICKNESS)
+    assert plan.sag <= plan.budget
     top0 = sim.state.body_pos.numpy()[-1].astype(float)
     sim.step(180)
     top = sim.state.body_pos.numpy()[-1].astype(float)

@@ -77,11 +77,11 @@ the box's cube-root mean half extent).  A stack that starts touching has no gaps
 Budgets scale with the bodies.  The sag of a column is a length fixed by g / omega^2, whatever the
 size of its bodies, so budgets in metres alone let small bodies sink by a large share of
 themselves: ten 1 cm cubes were planned at 4 substeps for a 6.9 mm sag, under the 7.5 mm
-``column_sag``, and the column fell over (5 cm cubes sank 13 % of a cube).  The budgets the plan
-keeps are therefore the smaller of the settings and a share of the scene's median body thickness
-(its thinnest dimension: a sphere's diameter, a box's smallest side): SAG_SHARE and
-LANDING_SHARE are the shares the settings are of the plates' 0.2 m thickness, where they were
-calibrated (the table above), so bodies 0.2 m thick or more plan as before.
+``column_sag``, and the column fell over (5 cm cubes sank 13 % of a cube).  The settings are
+therefore budgets for bodies CALIBRATION_THICKNESS (0.2 m, the plates they were calibrated on,
+the table above) thick or thicker, and the plan scales them down in proportion for a scene whose
+median body is thinner (its thinnest dimension: a sphere's diameter, a box's smallest side): at
+the defaults 3.75 % and 5 % of that thickness.  A raised setting is kept in the same proportion.
 """
 
 from __future__ import annotations
@@ -96,10 +96,9 @@ from .types import SHAPE_SPHERE
 MAX_AUTO_SUBSTEPS = 64
 LANDING_RESIDUAL = 0.69  # deepest transient / (v h) of a pile landed on, worst measured (module docstring)
 LANDING_PILE = 3  # bodies in a column from which a landing counts
-# the budgets as shares of the median body thickness (module docstring: the plates' 0.2 m, on which
-# column_sag = 7.5 mm and landing_depth = 1 cm were calibrated)
-SAG_SHARE = 0.0375
-LANDING_SHARE = 0.05
+# the body thickness the budgets column_sag and landing_depth hold for (module docstring: the
+# plates' 0.2 m, on which their defaults were calibrated); thinner bodies get them scaled down
+CALIBRATION_THICKNESS = 0.2
 
 
 def contact_hertz(h: float, setting: float | None) -> float:
@@ -150,7 +149,7 @@ class SubstepPlan:
                      f"{self.landing_transient() * 1000:.1f} mm, budget {self.landing_depth * 1000:g} mm)")
         if self.substeps != self.requested and self.sag_requested > self.budget:
             text += (f" (at the {self.requested} requested: {self.sag_requested * 1000:.1f} mm, over the "
-                     f"column_sag budget of {self.budget * 1000:g} mm)")
+                     f"sag budget of {self.budget * 1000:g} mm)")
         landing_requested = self.landing_transient(self.requested)
         if self.substeps != self.requested and landing_requested > self.landing_depth:
             text += (f" (at the {self.requested} requested the landing transient is "
@@ -289,18 +288,23 @@ def body_thickness(shape: np.ndarray, size: np.ndarray) -> np.ndarray:
     return 2.0 * np.where(shape == SHAPE_SPHERE, size[:, 0], np.min(np.abs(size), axis=1))
 
 
-def plan_budgets(model, config) -> tuple[float, float]:
-    """The column sag and landing depth the plan keeps [m]: the settings, or SAG_SHARE and
-    LANDING_SHARE of the median dynamic body's thickness where those are smaller (module
-    docstring)."""
+def budget_scale(model) -> float:
+    """The share of column_sag and landing_depth the plan keeps: the median dynamic body's
+    thickness over CALIBRATION_THICKNESS, at most 1 (module docstring)."""
     host = model.host
     dynamic = host["body_inv_mass"] > 0
     if not np.any(dynamic):
-        return float(config.column_sag), float(config.landing_depth)
+        return 1.0
     thickness = float(np.median(body_thickness(host["body_shape"][dynamic],
                                                np.asarray(host["body_size"], dtype=np.float64)[dynamic])))
-    return (min(float(config.column_sag), SAG_SHARE * thickness),
-            min(float(config.landing_depth), LANDING_SHARE * thickness))
+    return min(1.0, thickness / CALIBRATION_THICKNESS)
+
+
+def plan_budgets(model, config) -> tuple[float, float]:
+    """The column sag and landing depth the plan keeps [m]: the settings, scaled down for thin
+    bodies (budget_scale)."""
+    scale = budget_scale(model)
+    return scale * float(config.column_sag), scale * float(config.landing_depth)
 
 
 def plan_substeps(model, config, state=None) -> SubstepPlan:

@@ -50,8 +50,10 @@ class SimConfig:
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"
     auto_substeps: bool = True  # more substeps where the tallest column would sag past column_sag
-    column_sag: float = 0.0075  # [m] soft-contact sag the auto substep count keeps columns under
-    landing_depth: float = 0.01  # [m] transient depth the auto substep count keeps landings on piles under
+    # [m] soft-contact sag the auto substep count keeps columns under, and transient depth it keeps
+    # landings on piles under (both scaled down for bodies under 0.2 m thick: column_sag.plan_budgets)
+    column_sag: float = 0.0075
+    landing_depth: float = 0.01
     sleep: bool = True
     sleep_velocity: float = 0.05
     sleep_time: float = 0.5

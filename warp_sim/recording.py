@@ -53,7 +53,7 @@ FRAME_DTYPES = {"time": np.float64, "position": np.float32, "orientation": np.fl
 FRAME_WIDTH = {"position": 3, "orientation": 4, "velocity": 3, "angular_velocity": 3}
 CHUNK_FRAMES = 256
 FORMAT_VERSION = 2
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2  # 2: the solver's support shares (staged.support_share) saved
 
 
 def chunk_dir(path) -> Path:

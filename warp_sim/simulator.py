@@ -478,12 +478,14 @@ class Simulator:
     def _solver_settings(self) -> SolverSettings:
         """The config's solver settings, with the depth past which a contact is pushed back within
         the substep (contact_rows.closed_contact_bias): the column sag the substep plan runs with,
-        never under the plan's sag budget (column_sag, or less for small bodies:
-        column_sag.plan_budgets).  With auto_substeps off a column may be planned to sag past the
-        budget, and pushing its loaded contacts back would fight the load (a 1 kg cube under
-        1000 kg at 4 substeps, planned at 138 mm, was thrown out)."""
+        never under the column_sag setting.  With auto_substeps off a column may be planned to sag
+        past the budget, and pushing its loaded contacts back would fight the load (a 1 kg cube
+        under 1000 kg at 4 substeps, planned at 138 mm, was thrown out).  The setting, not the
+        plan's budget scaled down for thin bodies (column_sag.plan_budgets): a pile of pebbles that
+        forms later, which the plan does not foresee, sags by a length whatever their size, and
+        pushed back from a fraction of a millimetre its loaded contacts would fight the load too."""
         return dataclasses.replace(self.config.solver_settings(),
-                                   soft_depth=max(self.substep_plan.budget, self.substep_plan.sag))
+                                   soft_depth=max(self.config.column_sag, self.substep_plan.sag))
 
     def set_terrain(self, terrain):
         """Replace the terrain the bodies collide with (GUI edits); takes effect next step."""
@@ -532,8 +534,10 @@ class Simulator:
             self.sleep.gravity_magnitude = self._gravity_magnitude
             self.sleep.sleep_velocity = self.config.sleep_velocity
             self.sleep.sleep_time = self.config.sleep_time
+        support = self.solver.solver_support  # the next impacts read what the contacts held (staged.support_share)
         self.solver = make_solver(self._solver_settings(), self.config.gravity, self.device, self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
+        wp.copy(self.solver.solver_support, support)
         self.wake_all()
         self.invalidate_graph()
 

@@ -14,7 +14,8 @@ Box2D v3 puts whole islands to sleep.  Here the same rule is reached without bui
 * nothing sleeps where gravity is weaker than a_rise (zero gravity): a slow body is then told from
   a resting one by nothing the timers see, and a free body drifting at 0.049 m/s fell asleep
   after sleep_time, its momentum zeroed (two touching cubes drifting together alike).  Under
-  gravity a body no contact holds accelerates at g and the rise rule keeps it awake;
+  gravity a body no contact holds accelerates at g and the rise rule keeps it awake; one sliding
+  slower than sleep_velocity on a frictionless surface is still taken for resting (left);
 * a body sleeps when its own timer and those of all the dynamic bodies it touches have passed
   ``sleep_time``; so a pile sleeps when all of it has been still, as an island would;
 * a sleeping body that touches a body whose timer is short wakes up with its timer reset, and

@@ -46,10 +46,11 @@ def closed_contact_bias(separation: float, h: float, soft: wp.vec4, max_push_vel
     """Push-out velocity target of a closed contact (separation s <= 0) in a biased sweep.
 
     The soft law's bias is biasRate s (soft_step.py), which lets a spring hold a load by sagging
-    load / (m_eff omega^2).  The substep plan keeps that sag under ``column_sag`` for a whole
-    column (column_sag.py), so no contact carrying a load the plan allows is deeper than
-    soft[3] = column_sag.  A contact deeper than that was driven in by a blow the spring was
-    never meant to take (a plate struck through a pile of plates), so its excess s + d is pushed
+    load / (m_eff omega^2).  The substep plan keeps that sag under ``column_sag`` (less for thin
+    bodies: column_sag.plan_budgets) for a whole column, so no contact carrying a load the plan
+    allows is deeper than soft[3] = column_sag.  A contact deeper than
+    that was driven in by a blow the spring was never meant to take (a plate struck through a pile
+    of plates), so its excess s + d is pushed
     out within the substep: bias = min(biasRate s, (s + d) / h), capped at max_push_velocity as
     before.  The mass scale and leak stay the soft law's, so loads still find their spring
     equilibrium, and the relax takes the push speed back (RELAX_PASSES), so this adds no energy."""

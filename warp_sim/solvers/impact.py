@@ -64,7 +64,9 @@ after, adds to h v+ (solver_toi_shift, spent by the next integration).  Along th
 at the substep's end is then e (h |v_n| - gap) >= 0: the body bounces from the surface, never
 into it.  The impact itself acts on the velocity gravity has grown by t* (v- + g t*), and the
 substep's kick adds only the g (h - t*) after it: a rebound taken at the start lost (1 + e) g t*
-of its speed.
+of its speed.  Gravity here is each body's share that its contacts do not hold (staged.
+support_share, free_fall_share): a box resting on the ground gains nothing by t*, and counting
+g t* for it too cancelled the striker's own from the closing speed.
 
 The impulse acts where the bodies touch at t*: a pair's points are taken at the poses t* v and
 t* w carry the bodies to (pair_geometry.pair_point_now), one point of both bodies, so the
@@ -332,7 +334,7 @@ def impact_pair_velocity(
         if spheres_miss(xi + dpi0 - xj - dpj0, vi - vj, radius_i + radius_j, left, left * wp.length(kick)):
             return out
         toi_left = spheres_touch_time(xi + dpi0 - xj - dpj0, vi - vj, radius_i + radius_j, left, toi_left)
-    toi = t0 + toi_left
+    toi = wp.min(t0 + toi_left, settings.h)  # rounding may not carry it past the substep
     # the impulse acts where the bodies touch, at t*: the points' geometry there (rows k of normal,
     # arm_i, arm_j), the bodies moved on by t* v and turned by t* w.  Taken at the substep's start
     # instead, two balls still up to h |v| apart met along the wrong line (a billiard cut shot at

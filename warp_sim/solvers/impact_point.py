@@ -27,7 +27,7 @@ def engaged(gap: float, vn: float, h: float) -> bool:
 
 @wp.func
 def shadowed(gap: float, vn: float, pair_toi: float, margin: float) -> bool:
-    """A terrain point still more than ``margin`` (column_sag) from the ground when one of the body's
+    """A terrain point still more than ``margin`` (the plan's sag budget) from the ground when one of the body's
     pairs closes (``pair_toi``, pair_contact_times): the body meets that other body first.  Nearer,
     the two are one contact at the soft contact's scale: a plate resting on the ground against
     another has its pair touching and terrain points microns open, and holding those back (any

@@ -165,9 +165,14 @@ def solve_pair_points(
     # were, and its line of centres, far from the one at t0 for a grazing hit, pushed them again
     # (a ball at 0.75 diameters a substep grazing another at 0.95 of a diameter: 0.13 of its speed
     # sideways instead of 0.10)
+    # (a ball on a box keeps the start pose plus the shifts here: a face's normal is fixed, and an
+    # edge's contact is found again wherever it lies; t0 = h, an impact at the substep's end,
+    # leaves nothing to look at)
     t0 = float(0.0)
     if mode == MODE_SOLVE and spheres_apart:
         t0 = pair_event_start(i, j, solver)
+        if t0 >= settings.h:
+            t0 = 0.0
     for _pass in range(passes):
         before = vel
         normal_total = float(0.0)
