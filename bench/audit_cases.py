@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig, Simulator
+from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig, Simulator, cases
 from warp_sim.builder import Material
 from warp_sim.column_sag import contact_omega as contact_omega_of
 
@@ -333,26 +333,9 @@ def late_impact_tunnel(quick: bool) -> list[dict]:
 
 def random_impacts(seed: int, count: int = 12):
     """Spheres and boxes of random size, mass, orientation and spin on a lattice, flying at the
-    centre at 2-4 m/s; random e in [0, 1] and mu in [0, 1]; zero gravity, no terrain."""
-    from warp_sim.builder import random_quaternions
-
-    rng = np.random.default_rng(seed)
-    b = ModelBuilder()
-    b.set_terrain(NoTerrain())
-    side = int(math.ceil(count ** (1 / 3)))
-    quats = random_quaternions(rng, count)
-    for i in range(count):
-        cell = np.array([i % side, (i // side) % side, i // (side * side)], dtype=float)
-        pos = (cell - (side - 1) / 2.0) * 1.6 + rng.uniform(-0.1, 0.1, 3)
-        vel = -pos / max(np.linalg.norm(pos), 1e-6) * rng.uniform(2.0, 4.0) + rng.uniform(-0.5, 0.5, 3)
-        args = dict(mass=float(rng.uniform(0.5, 5.0)), position=tuple(pos), velocity=tuple(vel),
-                    angular_velocity=tuple(rng.uniform(-3, 3, 3)), restitution=float(rng.uniform(0, 1)),
-                    friction=float(rng.uniform(0, 1)))
-        if rng.random() < 0.5:
-            b.add_sphere(float(rng.uniform(0.15, 0.4)), **args)
-        else:
-            b.add_box(tuple(rng.uniform(0.1, 0.4, 3)), orientation=tuple(quats[i]), **args)
-    return simulate(b, gravity=ZERO_G, sleep=False)
+    centre at 2-4 m/s; random e in [0, 1] and mu in [0, 1]; zero gravity, no terrain
+    (warp_sim.cases.pileup_builder)."""
+    return simulate(cases.pileup_builder(seed, count), gravity=ZERO_G, sleep=False)
 
 
 def impact_properties(quick: bool) -> list[dict]:

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from warp_sim import ModelBuilder, SimConfig, Simulator
+from warp_sim import ModelBuilder, SimConfig, Simulator, cases
 from warp_sim.builder import Material
 from warp_sim.terrain import NoTerrain, PlaneTerrain
 
@@ -317,35 +317,9 @@ def test_random_impacts_keep_momentum_and_never_gain_energy(seed, contact_update
     np.testing.assert_allclose(angular_momentum_about_origin(sim), l0, atol=1e-4 * scale)
 
 
-def pileup(seed: int, count: int = 12):
-    """Spheres and boxes of random size (0.1 to 0.4), mass (0.5 to 5 kg), orientation and spin
-    (up to 3 rad/s an axis) on a lattice, all flying at the centre at 2 to 4 m/s, each with its own
-    e and mu in [0, 1]; zero gravity, no terrain."""
-    from warp_sim.builder import random_quaternions
-    from warp_sim.terrain import NoTerrain
-
-    rng = np.random.default_rng(seed)
-    b = ModelBuilder()
-    b.set_terrain(NoTerrain())
-    side = math.ceil(count ** (1 / 3))
-    quats = random_quaternions(rng, count)
-    for k in range(count):
-        cell = np.array([k % side, (k // side) % side, k // (side * side)], dtype=float)
-        pos = (cell - (side - 1) / 2.0) * 1.6 + rng.uniform(-0.1, 0.1, 3)
-        vel = -pos / max(np.linalg.norm(pos), 1e-6) * rng.uniform(2.0, 4.0) + rng.uniform(-0.5, 0.5, 3)
-        args = dict(mass=float(rng.uniform(0.5, 5.0)), position=tuple(pos), velocity=tuple(vel),
-                    angular_velocity=tuple(rng.uniform(-3, 3, 3)), restitution=float(rng.uniform(0, 1)),
-                    friction=float(rng.uniform(0, 1)))
-        if rng.random() < 0.5:
-            b.add_sphere(float(rng.uniform(0.15, 0.4)), **args)
-        else:
-            b.add_box(tuple(rng.uniform(0.1, 0.4, 3)), orientation=tuple(quats[k]), **args)
-    return b
-
-
 @pytest.mark.parametrize("seeds", [range(0, 20), range(20, 40)])
 def test_random_pileups_never_gain_energy(seeds, device):
-    """Twelve bodies thrown together (pileup): kinetic energy never rises in a step, whatever the
+    """Twelve bodies thrown together (cases.pileup_builder): kinetic energy never rises in a step, whatever the
     seed.  An impact's friction, swept against the slip v - (v . n) n, removes energy only with a
     unit normal; a ball's contact with a box turned on to t* by a first-order rotation had a face
     normal up to 4e-4 over unit length, and the friction pushed the pair apart through the normal
@@ -353,7 +327,7 @@ def test_random_pileups_never_gain_energy(seeds, device):
     +0.07 %).  Tolerance: float32 rounding of the energy, 1e-5 of it a step (the glancing and
     random-impact tests above)."""
     for seed in seeds:
-        sim = simulator(pileup(seed), device, gravity=(0.0, 0.0, 0.0))
+        sim = simulator(cases.pileup_builder(seed), device, gravity=(0.0, 0.0, 0.0))
         start = previous = sim.kinetic_energy()
         for step in range(60):
             sim.step()

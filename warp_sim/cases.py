@@ -198,3 +198,29 @@ def terrain_drop_builder(count: int, shape="sphere", terrain: FourierTerrain | N
         else:
             b.add_box(half_extents, 1.0, position=pos, orientation=tuple(quats[i]))
     return b
+
+
+def pileup_builder(seed: int, count: int = 12) -> ModelBuilder:
+    """Spheres and boxes of random size (0.1 to 0.4), mass (0.5 to 5 kg), orientation and spin (up
+    to 3 rad/s an axis) on a lattice, all flying at the centre at 2 to 4 m/s, each with its own e
+    and mu in [0, 1]; no terrain (run it without gravity).  The physics audit's random impacts and
+    the tests' pile-ups."""
+    from .builder import random_quaternions
+
+    rng = np.random.default_rng(seed)
+    b = ModelBuilder()
+    b.set_terrain(NoTerrain())
+    side = math.ceil(count ** (1 / 3))
+    quats = random_quaternions(rng, count)
+    for k in range(count):
+        cell = np.array([k % side, (k // side) % side, k // (side * side)], dtype=float)
+        pos = (cell - (side - 1) / 2.0) * 1.6 + rng.uniform(-0.1, 0.1, 3)
+        vel = -pos / max(np.linalg.norm(pos), 1e-6) * rng.uniform(2.0, 4.0) + rng.uniform(-0.5, 0.5, 3)
+        args = dict(mass=float(rng.uniform(0.5, 5.0)), position=tuple(pos), velocity=tuple(vel),
+                    angular_velocity=tuple(rng.uniform(-3, 3, 3)), restitution=float(rng.uniform(0, 1)),
+                    friction=float(rng.uniform(0, 1)))
+        if rng.random() < 0.5:
+            b.add_sphere(float(rng.uniform(0.15, 0.4)), **args)
+        else:
+            b.add_box(tuple(rng.uniform(0.1, 0.4, 3)), orientation=tuple(quats[k]), **args)
+    return b
