@@ -189,7 +189,7 @@ def update_sleep(
 
 
 class Sleep:
-    def __init__(self, model, sleep_velocity: float, sleep_time: float, device, gravity_magnitude: float = 9.81):
+    def __init__(self, model, sleep_velocity: float, sleep_time: float, device, gravity_magnitude: float):
         self.model = model
         self.device = device
         self.sleep_velocity = sleep_velocity
@@ -230,8 +230,7 @@ class Sleep:
         launch(update_sleep, m.body_count, key=self, inputs=[
             m.body_inv_mass, m.body_inv_inertia, m.body_bound_radius, dt, self.sleep_velocity, self.sleep_time,
             self.rise_acceleration() * dt, int(self.gravity_magnitude >= self.rise_acceleration()), state.body_rot,
-            state.body_vel,
-            state.body_angmom, self.body_sleep_timer, self.body_sleep_speed, self.body_sleep_rise,
+            state.body_vel, state.body_angmom, self.body_sleep_timer, self.body_sleep_speed, self.body_sleep_rise,
             self.body_neighbour_timer, self.body_inv_mass_awake], device=self.device)
 
     def rise_acceleration(self) -> float:

@@ -105,8 +105,7 @@ NO_CONTACT = 1.0e30  # the separation of a sphere-box pair whose contact has gon
 @wp.func
 def orthonormalized(m: wp.mat33) -> wp.mat33:
     """A rotation within second order of a first-order turned one, (1 + D) R: Gram-Schmidt on its
-    columns.  A
-    box turned on by t w from its drift (impact_point.drift_turned) is stretched by
+    columns.  A box turned on by t w from its drift (impact_point.drift_turned) is stretched by
     1 + (t |w|)^2 / 2, and a face normal taken from it was as much over unit length: the impact's
     friction then read the normal speed left in v - (v . n) n as slip and pushed the bodies apart
     through it (a ball glancing off a box spinning at 8 rad/s, 7 % of the pair's energy gained)."""

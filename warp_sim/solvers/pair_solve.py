@@ -13,7 +13,7 @@ from ..schedule.coloring import color_range
 from .impact import impact_pair, pair_event_start
 from .impact_point import spheres_miss
 from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
-from .pair_geometry import PairPoint, PairVelocity, pair_point_now, read_pair_velocity
+from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
 
@@ -365,18 +365,15 @@ def warm_start_pair_side(
         drift_pj = solver.solver_drift_p[j]
         drift_ri = solver.solver_drift_r[i]
         drift_rj = solver.solver_drift_r[j]
+    # the rotations the anchors turn from: the step's start where the pose is being reset
+    rot_ref = solver.solver_ref_rot
+    if reset_reference != 0:
+        rot_ref = state_in.body_rot
     for k in range(pairs.pair_point_count[p]):
         slot = p * POINTS + k
-        # (the rotations the anchors turn from: the step's start where the pose is being reset)
-        now = PairPoint()
-        if reset_reference == 0:
-            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
-                                 pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj,
-                                 solver.solver_ref_rot, i, j, model)
-        else:
-            now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
-                                 pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj,
-                                 state_in.body_rot, i, j, model)
+        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
+                             pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj, rot_ref, i, j,
+                             model)
         arm = wp.where(side == 0, now.arm_i, now.arm_j)
         impulse = sign * (pairs.pair_normal_impulse[slot] * now.normal + pairs.pair_tangent_impulse[slot])
         v = v + inv_mass * impulse
