@@ -20,6 +20,7 @@ import numpy as np
 
 from .model import Model
 from .collide.covered_faces import covered_faces
+from .collide.terrain_contact import sphere_terrain_slots
 from .terrain import NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
 from .validation import (BODY_ORDERS, BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, Choice, ValidationError, check,
@@ -425,7 +426,7 @@ class ModelBuilder:
         h["body_vel"] = np.where(dynamic[:, None], c["velocity"], 0.0).astype(np.float32)
 
         unit = unit_box_checkpoints(per_edge)
-        counts = np.where(is_sphere, 1, len(unit)).astype(np.int32)
+        counts = np.where(is_sphere, sphere_terrain_slots(self.terrain, size[:, 0]), len(unit)).astype(np.int32)
         starts = np.zeros(n, np.int64)
         if n:
             starts[1:] = np.cumsum(counts[:-1], dtype=np.int64)

@@ -15,9 +15,10 @@ amplitude); otherwise the terrain is noise to float32 (``frequency = 1e30``: the
 through and no contact is ever found) and the build is refused, naming the highest usable
 frequency.  What the contact method resolves is then a warning, not an error: box checkpoints
 sample the surface every d = 2 h_max / (checkpoints_per_edge - 1), so by Nyquist a term whose
-world wavelength 2 pi / (f |(m / s.x, n / s.z)|) is shorter than 2 d fits between them, and a
-sphere's one closest-point contact stands for the whole sphere only while its diameter stays
-below half the shortest wavelength.  Terms of world amplitude under ``SIGNIFICANT_AMPLITUDE``
+world wavelength 2 pi / (f |(m / s.x, n / s.z)|) is shorter than 2 d fits between them.  A
+sphere under the terrain's curvature radius touches it at one point; a wider one searches for up
+to five (collide/terrain_contact.py), which stand for the whole sphere while its diameter stays
+below the shortest wavelength (about a crest and a trough each way under it).  Terms of world amplitude under ``SIGNIFICANT_AMPLITUDE``
 (1 mm) are ignored there: missing them costs less than the solver's own slop.
 
 Run length (``check_step_count``): a run's time is estimated as steps x substeps x (bodies x
@@ -88,15 +89,17 @@ def box_checkpoint_count(per_edge: int) -> int:
 
 
 def estimate_bytes(bodies: int, boxes: int = 0, per_edge: int = 3, pair_capacity: int | None = None,
-                   frames_in_memory: int = 0) -> dict:
-    """Bytes by part: bodies, checkpoints, contact pairs, frames; and the total."""
+                   frames_in_memory: int = 0, sphere_slots: int | None = None) -> dict:
+    """Bytes by part: bodies, checkpoints, contact pairs, frames; and the total.  ``sphere_slots``:
+    the spheres' terrain slots, one each unless given (wider spheres take more: terrain_contact.py)."""
     from .recording import frame_bytes
 
     if pair_capacity is None:
         pair_capacity = 8 * bodies + 64 if bodies >= 2 else 0
     parts = {
         "bodies": bodies * BYTES_PER_BODY,
-        "checkpoints": (bodies - boxes + boxes * box_checkpoint_count(per_edge)) * BYTES_PER_CHECKPOINT,
+        "checkpoints": ((bodies - boxes if sphere_slots is None else sphere_slots)
+                        + boxes * box_checkpoint_count(per_edge)) * BYTES_PER_CHECKPOINT,
         "contact pairs": pair_capacity * BYTES_PER_PAIR,
         "frames": frames_in_memory * frame_bytes(bodies),
     }
@@ -131,7 +134,10 @@ def check_scene_memory(scene, frames_in_memory: int = 0, available: int | None =
     boxes = int(np.count_nonzero(c["shape"] == 1))
     per_edge = scene.checkpoints_per_edge or scene.builder.default_checkpoints_per_edge()
     capacity = _pair_capacity(scene.config, n)
-    parts = estimate_bytes(n, boxes, per_edge, capacity, frames_in_memory)
+    from .collide.terrain_contact import sphere_terrain_slots
+
+    sphere_slots = int(sphere_terrain_slots(scene.terrain, c["size"][c["shape"] != 1, 0]).sum())
+    parts = estimate_bytes(n, boxes, per_edge, capacity, frames_in_memory, sphere_slots)
     keys = {
         "bodies": f"{n:,} bodies",
         "checkpoints": f"[terrain] checkpoints_per_edge = {per_edge} ({box_checkpoint_count(per_edge):,} per box, "
@@ -228,10 +234,13 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
             warnings.warn(
                 f"{where}: bumps of wavelength {shortest:.3g} m fit between box checkpoints {spacing:.3g} m apart, "
                 f"so boxes can sink into them; use checkpoints_per_edge >= {need} or a lower frequency", stacklevel=3)
-    spheres = ~boxes
-    if spheres.any():
-        r = float(size[spheres, 0].max())
-        if 2.0 * r > 0.5 * shortest:
+    # spheres under the curvature radius touch once: only wide ones that span a wavelength can miss
+    from .collide.terrain_contact import WIDE_SPHERE_SLOTS, sphere_terrain_slots
+
+    wide = ~boxes & (sphere_terrain_slots(terrain, size[:, 0]) > 1)
+    if wide.any():
+        r = float(size[wide, 0].max())
+        if 2.0 * r > shortest:
             warnings.warn(
-                f"{where}: spheres of radius {r:.3g} m span more than half the shortest terrain wavelength "
-                f"({shortest:.3g} m); their one closest-point contact can miss a second bump", stacklevel=3)
+                f"{where}: spheres of radius {r:.3g} m span more than the shortest terrain wavelength "
+                f"({shortest:.3g} m); their {WIDE_SPHERE_SLOTS} contact searches can miss further bumps", stacklevel=3)

@@ -105,6 +105,15 @@ class FourierTerrain:
         gw = float(np.sum(a * self.frequency * n)) * self.scale[1] / self.scale[2]
         return math.hypot(gu, gw)
 
+    def curvature_bound(self) -> float:
+        """An upper bound of every second directional derivative of H, hence of the surface's
+        curvature (|H''| / (1 + H'^2)^(3/2) <= |H''|): |A| (f |k . e'|)^2 summed, as cubic_bound."""
+        k = self.terms
+        a = np.abs(self.amplitude_table())
+        m, n = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+        reach = np.sqrt((m / self.scale[0]) ** 2 + (n / self.scale[2]) ** 2)
+        return float(np.sum(a * (self.frequency * reach) ** 2)) * abs(self.scale[1])
+
     def cubic_bound(self) -> float:
         """An upper bound of every third directional derivative of H (unit horizontal direction e).
 

@@ -17,6 +17,25 @@ resting sphere converges in one or two iterations.  A sphere whose vertical gap 
 sqrt(1 + G^2) (G bounds |grad H| everywhere) already exceeds r + margin cannot touch the
 surface and skips the search.
 
+Spheres wider than the terrain's tightest curve: the distance from the centre can have several
+local minima (the two walls of a trough narrower than the ball) and the point under the centre
+can be a stationary point between them (the trough's bottom, a saddle or maximum of F, where
+Newton starts and stops).  A sphere whose radius reaches 1 / kappa, kappa bounding the surface's
+curvature (FourierTerrain.curvature_bound), is given ``WIDE_SPHERE_SLOTS`` slots: slot 0 as
+above, and four more whose searches start from the points half a radius to the +-x and +-z of
+the centre (then from their own last closest point), so each finds a local minimum of F on its
+side.  Newton stops wherever F's gradient vanishes, and a seed on a line of symmetry (the +x seed
+over a pit whose four contacts lie on the diagonals) reaches the saddle between two minima: a
+further slot that ends where F's Hessian is not positive definite searches again from a quarter
+radius down its most negative curvature direction (``saddle_escape``) and keeps the nearer point.
+A slot that lands within ``DUPLICATE_SHARE`` r of an earlier slot's point is closed, so a surface
+point is held once.  Every stationary point found is a valid constraint (that surface
+point stays outside the sphere, linearised along its normal), so a slot at a saddle never
+holds the ball wrongly; it only lies further than the minima and is usually inactive.  A sphere
+under 1 / kappa touches a smooth surface at one point (a curve that leaves a circle tangentially
+and meets it again tangentially bends more than the circle in between), so it keeps its one
+slot and the search below is unchanged.
+
 Boxes: the thesis's checkpoints.  A checkpoint p is compared with the
 surface directly below it: depth = (H(p.x, p.z) - p.y) n_y with n the unit normal from the
 gradient, the first-order distance to the surface (exact on planes).
@@ -43,17 +62,70 @@ point can close in one substep; the solver then lets it close exactly that gap (
 so a fast body stops on the surface instead of passing through it.
 """
 
+import numpy as np
 import warp as wp
 
 from ..integrate import world_inv_inertia
 from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
-from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
+from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
 from ..types import SHAPE_SPHERE
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
 
 NEWTON_ITERATIONS = 6
+WIDE_SPHERE_SLOTS = 5
+SEED_OFFSET = wp.constant(0.5)  # [radii] the extra slots' cold starts, off the centre
+DUPLICATE_SHARE = wp.constant(0.05)  # [radii] slots closer than this hold one surface point
+ESCAPE_OFFSET = wp.constant(0.25)  # [radii] a further slot's restart off a saddle
+
+
+def sphere_terrain_slots(terrain, radius) -> np.ndarray:
+    """Terrain contact slots per sphere of ``radius`` (array): WIDE_SPHERE_SLOTS where the radius
+    reaches the terrain's curvature radius bound, else 1 (see the module docstring)."""
+    radius = np.asarray(radius, dtype=np.float64)
+    curvature = terrain.curvature_bound() if isinstance(terrain, FourierTerrain) else 0.0
+    return np.where(radius * curvature >= 1.0, WIDE_SPHERE_SLOTS, 1).astype(np.int32)
+
+
+@wp.func
+def saddle_escape(s: HeightSample, center: wp.vec3, k: int) -> wp.vec2:
+    """Where F's Hessian at the sample is not positive definite (a saddle or maximum of the distance,
+    such as a point between two walls on a line of symmetry), its most negative curvature direction,
+    signed towards slot k's seed direction turned a quarter (+x to +z, +z to -x, ...), so the four
+    slots leave the saddles of a symmetric pit for four different minima; else zero."""
+    dy = s.height - center[1]
+    a = 1.0 + s.grad[0] * s.grad[0] + dy * s.hess[0]
+    b = s.grad[0] * s.grad[1] + dy * s.hess[1]
+    c = 1.0 + s.grad[1] * s.grad[1] + dy * s.hess[2]
+    if a > 0.0 and c > 0.0 and a * c - b * b > 0.0:
+        return wp.vec2(0.0, 0.0)
+    lowest = 0.5 * (a + c) - wp.sqrt(0.25 * (a - c) * (a - c) + b * b)
+    # (lowest - c, b) and (b, lowest - a) are both eigenvectors; take the longer (one can vanish)
+    e = wp.vec2(lowest - c, b)
+    other = wp.vec2(b, lowest - a)
+    if wp.length(other) > wp.length(e):
+        e = other
+    if wp.length(e) < 1.0e-12:
+        e = wp.vec2(1.0, 0.0)  # a multiple of the identity: every direction is as low
+    d = seed_direction(k)
+    side = wp.vec2(-d[1], d[0])
+    e = wp.normalize(e)
+    if wp.dot(e, side) < 0.0:
+        e = -e
+    return e
+
+
+@wp.func
+def seed_direction(k: int) -> wp.vec2:
+    """Slot k's cold-start direction: +x, -x, +z, -z for k = 1 to 4."""
+    if k == 1:
+        return wp.vec2(1.0, 0.0)
+    if k == 2:
+        return wp.vec2(-1.0, 0.0)
+    if k == 3:
+        return wp.vec2(0.0, 1.0)
+    return wp.vec2(0.0, -1.0)
 CULL_SLACK = 1.0e-3  # [m]
 CULL_SLACK_RATE = 1.0e-7  # [m per m of |x| + |z|]
 
@@ -159,7 +231,12 @@ def collide_terrain(
         # pass's window covered it), and one that moved under 1 mm has a tangent-plane gap error
         # under k (1 mm)^2 / 2
         start = model.body_checkpoint_start[body]
-        if model.body_shape[body] != SHAPE_SPHERE or contacts.terrain_contact_active[start] == 0:
+        if model.body_shape[body] != SHAPE_SPHERE:
+            return
+        touching = int(0)
+        for slot in range(start, start + model.body_checkpoint_count[body]):
+            touching = touching | contacts.terrain_contact_active[slot]
+        if touching == 0:
             return
         if wp.length(state_in.body_pos[body] - reference_pos[body]) < REFRESH_MIN_TRAVEL:
             return
@@ -183,6 +260,8 @@ def collide_terrain(
 
     active = int(0)
     for slot in range(start, start + count):
+        if refresh_spheres != 0 and contacts.terrain_contact_active[slot] == 0:
+            continue  # a wide sphere's idle slot stays idle until the next pass
         depth = float(-1.0e30)
         normal = wp.vec3(0.0, 1.0, 0.0)
         point = x
@@ -199,16 +278,23 @@ def collide_terrain(
                 if is_sphere:
                     # Start from last substep's closest point when there was one, else from the
                     # point straight below, which also gives the cheap can't-reach test.
+                    # A wide sphere's further slots start off the centre (module docstring).
+                    k = slot - start
+                    seed = float(0.0)
                     start_xz = wp.vec2(x[0], x[2])
                     if contacts.terrain_contact_active[slot] != 0:
                         start_xz = contacts.terrain_contact_surface[slot]
+                    elif k > 0:
+                        seed = SEED_OFFSET * radius
+                        start_xz = start_xz + seed * seed_direction(k)
                     s0 = fourier_sample(terrain.terrain_coef, terrain.terrain_terms,
                                         terrain.terrain_frequency, terrain.terrain_scale,
                                         terrain.terrain_offset, start_xz[0], start_xz[1])
                     reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
                     can_touch = True
                     if contacts.terrain_contact_active[slot] == 0:
-                        lower_bound = (x[1] - s0.height) / gap_scale
+                        # the ground under the centre is at most slope_bound * seed above the seed's
+                        lower_bound = (x[1] - s0.height - terrain.terrain_slope_bound * seed) / gap_scale
                         can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
                     if can_touch:
                         xz, s = sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms,
@@ -220,10 +306,35 @@ def collide_terrain(
                             s = s0
                             xz = start_xz
                             surface = wp.vec3(start_xz[0], s0.height, start_xz[1])
+                        if k > 0:
+                            escape = saddle_escape(s, x, k)
+                            if wp.length(escape) > 0.0:
+                                # a further slot stopped at a saddle of F: search again from its
+                                # downhill side and keep what lies nearer
+                                start_2 = xz + (ESCAPE_OFFSET * radius) * escape
+                                s_2 = fourier_sample(terrain.terrain_coef, terrain.terrain_terms,
+                                                     terrain.terrain_frequency, terrain.terrain_scale,
+                                                     terrain.terrain_offset, start_2[0], start_2[1])
+                                reach_2 = wp.length(x - wp.vec3(start_2[0], s_2.height, start_2[1]))
+                                xz_2, s_3 = sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms,
+                                                                   terrain.terrain_frequency, terrain.terrain_scale,
+                                                                   terrain.terrain_offset, x, start_2, s_2, reach_2)
+                                surface_2 = wp.vec3(xz_2[0], s_3.height, xz_2[1])
+                                if wp.length(x - surface_2) < wp.length(x - surface):
+                                    xz = xz_2
+                                    s = s_3
+                                    surface = surface_2
                         normal = fourier_normal(s.grad)
                         depth = radius - wp.dot(x - surface, normal)
                         point = x - radius * normal
                         contacts.terrain_contact_surface[slot] = xz
+                        if k > 0 and refresh_spheres == 0:
+                            # the earlier slots were written by this thread in this pass
+                            for other in range(start, slot):
+                                if contacts.terrain_contact_active[other] != 0:
+                                    apart = wp.length(contacts.terrain_contact_surface[other] - xz)
+                                    if apart < DUPLICATE_SHARE * radius:
+                                        depth = float(-1.0e30)
                 else:
                     point = x + rot * model.checkpoint_local[slot]
                     reachable = True
