@@ -18,8 +18,9 @@ sample the surface every d = 2 h_max / (checkpoints_per_edge - 1), so by Nyquist
 world wavelength 2 pi / (f |(m / s.x, n / s.z)|) is shorter than 2 d fits between them.  A
 sphere under the terrain's curvature radius touches it at one point; a wider one searches for up
 to five (collide/terrain_contact.py), which stand for the whole sphere while its diameter stays
-below the shortest wavelength (about a crest and a trough each way under it).  Terms of world amplitude under ``SIGNIFICANT_AMPLITUDE``
-(1 mm) are ignored there: missing them costs less than the solver's own slop.
+below the shortest wavelength (about a crest and a trough each way under it).  Terms of world
+amplitude under ``SIGNIFICANT_AMPLITUDE`` (1 mm) are ignored there: missing them costs less than
+the solver's own slop.
 
 Run length (``check_step_count``): a run's time is estimated as steps x substeps x (bodies x
 ``BODY_SUBSTEP_S`` + ``SUBSTEP_OVERHEAD_S``), the CPU figures of bench/rain.py rounded up; a run

@@ -67,7 +67,8 @@ import warp as wp
 
 from ..integrate import world_inv_inertia
 from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
-from ..terrain import TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope, fourier_normal, fourier_sample
+from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope,
+                       fourier_normal, fourier_sample)
 from ..types import SHAPE_SPHERE
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
@@ -126,6 +127,8 @@ def seed_direction(k: int) -> wp.vec2:
     if k == 3:
         return wp.vec2(0.0, 1.0)
     return wp.vec2(0.0, -1.0)
+
+
 CULL_SLACK = 1.0e-3  # [m]
 CULL_SLACK_RATE = 1.0e-7  # [m per m of |x| + |z|]
 
