@@ -48,6 +48,7 @@ from bench.common import machine_info  # noqa: E402
 from warp_sim import FourierTerrain, SimConfig, Simulator  # noqa: E402
 from warp_sim.body_order import body_order  # noqa: E402
 from warp_sim.builder import box_checkpoints, inertia_box, random_quaternions  # noqa: E402
+from warp_sim.collide.terrain_contact import sphere_terrain_slots  # noqa: E402
 from warp_sim.model import Model  # noqa: E402
 from warp_sim.types import SHAPE_BOX, SHAPE_SPHERE  # noqa: E402
 
@@ -89,7 +90,7 @@ def rain_model(count: int, shape: str, device, spacing: float = 1.2, radius: flo
     box_inertia = inertia_box(1.0, (half,) * 3)
     inertia = np.where(sphere[:, None], 0.4 * radius * radius, box_inertia[None, :])
     points = box_checkpoints((half,) * 3, 3)
-    per_body = np.where(sphere, 1, len(points)).astype(np.int32)
+    per_body = np.where(sphere, sphere_terrain_slots(terrain, np.full(count, radius)), len(points)).astype(np.int32)
     start = np.concatenate([[0], np.cumsum(per_body)[:-1]]).astype(np.int32)
     local = np.zeros((int(per_body.sum()), 3))
     boxes = np.flatnonzero(~sphere)

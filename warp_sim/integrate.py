@@ -61,6 +61,10 @@ from .types import (
 )
 
 
+# alpha by integrator name, for the host (pre_kick_fraction is the kernels')
+PRE_KICK_FRACTION = {"explicit_euler": 0.0, "semi_implicit": 1.0, "verlet": 0.5, "rk4": 0.5}
+
+
 @wp.func
 def pre_kick_fraction(integrator: int) -> float:
     if integrator == INTEGRATOR_EXPLICIT_EULER:

@@ -50,6 +50,7 @@ from .collide import collide_terrain
 from .collide.narrow_phase import reach_outrun
 from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
+from .integrate import PRE_KICK_FRACTION
 from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bind
 from .launch import cpu_threads, launch
 from .model import Model
@@ -127,7 +128,7 @@ class Simulator:
         self.physics_model = model
         if config.sleep and dynamic >= 1:
             self.sleep = Sleep(model, config.sleep_velocity, config.sleep_time, self.device,
-                               float(np.linalg.norm(config.gravity)))
+                               float(np.linalg.norm(config.gravity)), self._closing_kick())
             self.physics_model = AwakeModel(model, self.sleep.body_inv_mass_awake)
         self.pairs = None
         self._color_sizes = None
@@ -169,6 +170,11 @@ class Simulator:
     @property
     def substep_dt(self) -> float:
         return self.config.dt / self.substeps
+
+    def _closing_kick(self) -> tuple:
+        """(1 - alpha) g h: the gravity each substep adds after its solve (integrate.py)."""
+        share = 1.0 - PRE_KICK_FRACTION[self.config.integrator]
+        return tuple(float(share * self.substep_dt * g) for g in self.config.gravity)
 
     def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False):
         """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between
@@ -534,6 +540,7 @@ class Simulator:
             self.sleep.gravity_magnitude = self._gravity_magnitude
             self.sleep.sleep_velocity = self.config.sleep_velocity
             self.sleep.sleep_time = self.config.sleep_time
+            self.sleep.closing_kick = self._closing_kick()
         support = self.solver.solver_support  # the next impacts read what the contacts held (staged.support_share)
         self.solver = make_solver(self._solver_settings(), self.config.gravity, self.device, self.model.body_count)
         self.solver.sim_step.assign(np.array([self.step_count], dtype=np.int32))
