@@ -123,7 +123,7 @@ def test_format_summary():
 
 BAD_RUNS = {
     "scene error": ('[sim]\ndt = -0.01\n[[body]]\nshape = "sphere"\nradius = 0.1\n', [],
-                    "[sim] dt must be a positive finite number, got -0.01"),
+                    "[sim] dt must be a number in [1e-06, 1], got -0.01"),
     "toml syntax": ("[sim\n", [], "TOML syntax error"),
     "missing file": (None, [], "cannot read scene file"),
     "zero steps": (TINY, ["--steps", "0"], "--steps must be an integer >= 1, got 0"),

@@ -24,9 +24,9 @@ API_ERRORS = {
     "position": (lambda: ModelBuilder().add_sphere(0.1, position=(0, 1e39, 0)),
                  "position must be 3 finite numbers, got [0, 1e+39, 0]"),
     "static": (lambda: ModelBuilder().add_sphere(0.1, static="yes"), "static must be true or false, got 'yes'"),
-    "negative dt": (lambda: SimConfig(dt=-1), "SimConfig dt must be a positive finite number, got -1"),
-    "zero substeps": (lambda: SimConfig(substeps=0), "SimConfig substeps must be an integer >= 1, got 0"),
-    "float substeps": (lambda: SimConfig(substeps=2.0), "SimConfig substeps must be an integer >= 1, got 2.0"),
+    "negative dt": (lambda: SimConfig(dt=-1), "SimConfig dt must be a number in [1e-06, 1], got -1"),
+    "zero substeps": (lambda: SimConfig(substeps=0), "SimConfig substeps must be an integer in [1, 4096], got 0"),
+    "float substeps": (lambda: SimConfig(substeps=2.0), "SimConfig substeps must be an integer in [1, 4096], got 2.0"),
     "bogus integrator": (lambda: SimConfig(integrator="bogus"),
                          "SimConfig integrator must be one of explicit_euler, semi_implicit, verlet, rk4, got 'bogus'"),
     "gravity": (lambda: SimConfig(gravity=(0, -9.81)), "SimConfig gravity must be 3 finite numbers, got [0, -9.81]"),
@@ -72,7 +72,7 @@ def test_step_count_is_checked(device):
             sim.step(bad)
     sim.step(0)
     assert sim.step_count == 0
-    with pytest.raises(ValueError, match="SimConfig substeps must be an integer >= 1, got 0"):
+    with pytest.raises(ValueError, match=r"SimConfig substeps must be an integer in \[1, 4096\], got 0"):
         sim.update_settings(substeps=0)
     assert sim.config.substeps == 4  # a refused change leaves the settings as they were
 
@@ -188,3 +188,59 @@ def test_bodies_view_round_trips():
     assert copy.body_count == 4 and copy.bodies[-1]["size"][0] == 0.4
     assert np.all(copy.columns()["friction"] == 0.9)
     np.testing.assert_array_equal(copy.columns()["position"], b.columns()["position"])
+
+
+@pytest.mark.parametrize("key, value", [("dt", 1e-300), ("dt", 2.0), ("substeps", 2**31), ("iterations", 10**20),
+                                        ("relax_iterations", 10**9), ("relax_passes", 5000),
+                                        ("contact_hertz", 1e-300)])
+def test_settings_that_would_break_far_away_are_refused_by_name(key, value):
+    """A positive dt of 1e-300 passed "> 0" and overflowed the contact frequency's square in the
+    substep plan; a contact frequency of 1e-300 Hz divided by zero there; billions of substeps or
+    sweeps were accepted and the run never ended.  Each is now a one-line error naming the field
+    and the value, from SimConfig, a scene file and update_settings alike."""
+    with pytest.raises(ValueError, match=rf"{key} must be .*got {value:g}" if isinstance(value, float)
+                       else rf"{key} must be .*got {value}"):
+        SimConfig(**{key: value})
+    with pytest.raises(SceneError, match=rf"\[sim\] {key} must be"):
+        parse_scene({"sim": {key: value}, "body": [{"shape": "sphere", "radius": 0.1}]}, "s.toml")
+    b = ModelBuilder()
+    b.add_sphere(0.1, position=(0.0, 1.0, 0.0))
+    sim = Simulator(b.finalize("cpu"), SimConfig())
+    with pytest.raises(ValueError, match=rf"{key} must be"):
+        sim.update_settings(**{key: value})
+
+
+def test_a_run_too_long_to_count_is_refused_by_name():
+    from warp_sim.simulator import expected_steps
+
+    with pytest.raises(ValueError, match=r"duration = 1e\+308 s at dt = 0.0166667 s is inf steps"):
+        expected_steps(1e308, 1.0 / 60.0)
+    assert expected_steps(1.0, 1.0 / 60.0) == 60
+
+
+@pytest.mark.parametrize("tiny", [1e-300, 1e-200, 1e-40])
+def test_tiny_vectors_keep_their_direction(tiny):
+    """A normal or orientation of 1e-300 has a direction; v / |v| squared it to 0 and gave inf and
+    NaN (a plane that no ball touched, a box with a NaN quaternion)."""
+    assert PlaneTerrain(normal=(tiny, 0.0, 0.0)).normal == (1.0, 0.0, 0.0)
+    assert PlaneTerrain(normal=(0.0, tiny, -tiny)).normal == pytest.approx((0.0, 2**-0.5, -(2**-0.5)))
+    b = ModelBuilder()
+    b.add_box((0.1, 0.1, 0.1), orientation=(tiny, 0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(b.host_arrays(2)["body_quat"], [[1.0, 0.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize("key, value", [("body_contact", False), ("device", "cuda:7"), ("contact_max", 1),
+                                        ("sleep", False), ("broad_phase", "all_pairs"), ("pair_schedule", "colors"),
+                                        ("graph", True)])
+def test_update_settings_refuses_what_the_simulator_is_built_around(key, value):
+    """These were stored and never applied (bodies kept colliding after body_contact = False)."""
+    b = ModelBuilder()
+    b.add_sphere(0.1, position=(0.0, 1.0, 0.0))
+    b.add_sphere(0.1, position=(0.0, 1.3, 0.0))
+    sim = Simulator(b.finalize("cpu"), SimConfig())
+    with pytest.raises(ValueError, match=rf"SimConfig.{key} is fixed when the Simulator is built"):
+        sim.update_settings(**{key: value})
+    if getattr(sim.config, key) is not None:  # graph = None: chosen by the device at build
+        sim.update_settings(**{key: getattr(sim.config, key)})  # the value it was built with is no change
+    with pytest.raises(ValueError, match="unknown simulation setting 'validate'"):
+        sim.update_settings(validate=1)

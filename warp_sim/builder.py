@@ -24,7 +24,7 @@ from .collide.terrain_contact import sphere_terrain_slots
 from .terrain import NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
 from .validation import (BODY_ORDERS, BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, Choice, ValidationError, check,
-                         check_array, check_fields)
+                         check_array, check_fields, unit_rows)
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 COLUMNS = ("shape", "size", "mass", "position", "orientation", "velocity", "angular_velocity", "restitution",
@@ -400,7 +400,7 @@ class ModelBuilder:
         check_terrain_resolution(self.terrain, c, per_edge)
         inertia = body_inertia(shape, size, mass)
         bound = np.where(is_sphere, size[:, 0], np.linalg.norm(size, axis=1))
-        q = c["orientation"] / np.linalg.norm(c["orientation"], axis=1, keepdims=True)
+        q = unit_rows(c["orientation"], axis=1)
         rot = quats_to_matrices(q)
         dynamic = ~c["static"]
         h = {

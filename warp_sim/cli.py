@@ -119,6 +119,11 @@ def run_command(args) -> int:
     except ValueError as e:
         raise CommandError(str(e)) from None
     checkpoint = _checkpoint_path(args, out)
+    # one file for two jobs: the recording overwrote the checkpoint (or the one being resumed)
+    if checkpoint is not None and checkpoint.resolve() == out.resolve():
+        raise CommandError(f"--checkpoint and --out name the same file '{out}'")
+    if args.resume is not None and Path(args.resume).resolve() == out.resolve():
+        raise CommandError(f"--resume and --out name the same file '{out}': the run would overwrite it")
 
     resume_info = resume_arrays = None
     if args.resume is not None:

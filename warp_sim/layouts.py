@@ -68,7 +68,7 @@ import numpy as np
 
 from .builder import ModelBuilder, quat_to_matrix, quats_to_matrices, random_quaternions
 from .limits import check_body_count
-from .scene import Boolean, Choice, Count, Integer, Number, Point, SceneError, Vector, show
+from .scene import Boolean, Choice, Count, Integer, Number, Point, SceneError, Vector, show, unit_rows
 from .terrain import FourierTerrain, PlaneTerrain
 
 DEFAULT_RADIUS = 0.25
@@ -228,7 +228,7 @@ def chain(p: dict, builder: ModelBuilder, terrain, rng: np.random.Generator):
     shape = p["shape"]
     _check_shape_keys(p, shape)
     size = _shape_size(p, shape)
-    d = np.asarray(p["direction"]) / np.linalg.norm(p["direction"])
+    d = unit_rows(p["direction"])
     reach = size[0] if shape == "sphere" else float(np.abs(d) @ np.asarray(size))
     spacing = p.get("spacing", 2.0 * reach)
     if spacing < 2.0 * reach * (1.0 - 1e-9):

@@ -37,7 +37,7 @@ from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 from .validation import (  # noqa: F401  (the specs and schemas are re-exported for layouts.py and tests)
     BODY_SCHEMA, FLOAT32_MAX, FOURIER_SCHEMA, MATERIAL_SCHEMA, NONE_SCHEMA, PLANE_SCHEMA, SIM_BUILD_SCHEMA, SIM_SCHEMA,
     TERRAIN_KIND, Bad, Boolean, Choice, Count, Integer, Matrix, Number, Pattern, Point, String, ValidationError, Vector,
-    check, is_finite, is_number, show, where_key,
+    check, is_finite, is_number, show, unit_rows, where_key,
 )
 
 
@@ -270,7 +270,7 @@ def _add_body(builder: ModelBuilder, table, where: str):
         raise SceneError(f"{where} {size_key} is required for shape {shape!r} ({spec.describe()})")
     q = np.asarray(b["orientation"])
     common = {
-        "mass": b["mass"], "position": b["position"], "orientation": q / np.linalg.norm(q),
+        "mass": b["mass"], "position": b["position"], "orientation": unit_rows(q),
         "velocity": b["velocity"], "angular_velocity": b["angular_velocity"],
         "restitution": b.get("restitution"), "friction": b.get("friction"), "static": b["static"],
     }

@@ -522,11 +522,16 @@ class Simulator:
     def update_settings(self, **changes):
         """Change SimConfig fields (dt, substeps, gravity, integrator, ...) between steps.
 
-        Unknown names raise ValueError naming the field.
+        Unknown names raise ValueError naming the field, and so do the settings the Simulator is
+        built around (BUILD_SETTINGS: the device, the pair buffers and pipeline, sleeping, graph
+        capture), which a change here would store and never apply.
         """
         for key in changes:
-            if not hasattr(self.config, key):
+            if key not in SIM_SCHEMA:
                 raise ValueError(f"unknown simulation setting {key!r}")
+            if key in BUILD_SETTINGS and changes[key] != getattr(self.config, key):
+                raise ValueError(f"SimConfig.{key} is fixed when the Simulator is built; build a new Simulator "
+                                 f"to change it (got {changes[key]!r}, built with {getattr(self.config, key)!r})")
         for key, value in changes.items():
             check_value(SIM_SCHEMA[key], value, key, "SimConfig")
         for key, value in changes.items():
@@ -599,5 +604,16 @@ class Simulator:
         return {"terrain_kind": "none"}
 
 
+# what Simulator.__init__ builds from (arrays, pipelines, the device): update_settings refuses them
+BUILD_SETTINGS = ("device", "body_contact", "contact_max", "sleep", "broad_phase", "pair_schedule", "graph")
+STEP_COUNT_MAX = 2**31 - 1  # the step counter is an int32 on the device
+
+
 def expected_steps(duration: float, dt: float) -> int:
-    return max(1, int(math.ceil(duration / dt - 1e-9)))
+    """Steps of ``dt`` that cover ``duration``; ValueError naming both where that is no count a run
+    can hold (``duration = 1e308`` overflowed int())."""
+    steps = duration / dt
+    if not math.isfinite(steps) or steps > STEP_COUNT_MAX:
+        raise ValueError(f"duration = {duration:g} s at dt = {dt:g} s is {steps:.3g} steps, more than "
+                         f"{STEP_COUNT_MAX:,} a run can count")
+    return max(1, int(math.ceil(steps - 1e-9)))

@@ -188,11 +188,11 @@ class PlaneTerrain:
     kind: str = field(default="plane", init=False)
 
     def __post_init__(self):
-        from .validation import PLANE_SCHEMA, check_fields
+        from .validation import PLANE_SCHEMA, check_fields, unit_rows
 
         check_fields(self, PLANE_SCHEMA, "PlaneTerrain")
         n = np.asarray(self.normal, dtype=np.float64)
-        self.normal = tuple(float(v) for v in n / np.linalg.norm(n))
+        self.normal = tuple(float(v) for v in unit_rows(n))
 
     def height(self, x, z):
         """Height of the plane above (x, z); only defined for non-vertical planes."""

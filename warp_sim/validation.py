@@ -3,7 +3,7 @@ the terrain classes and Simulator.step.  One copy, so the messages agree everywh
 
     scene.toml: [[body]] #3 mass must be a positive finite number, got 0     (scene file)
     mass must be a positive finite number, got 0                            (builder.add_sphere)
-    SimConfig dt must be a positive finite number, got -1                   (SimConfig(dt=-1))
+    SimConfig dt must be a number in [1e-06, 1], got -1                   (SimConfig(dt=-1))
 
 Each spec turns a raw value into a clean Python value or raises ``Bad``; ``check`` turns that
 into a ValidationError (a ValueError) naming the field and the value.  "Finite" means
@@ -188,6 +188,16 @@ class Vector:
         return out
 
 
+def unit_rows(v, axis: int = -1) -> np.ndarray:
+    """``v`` scaled to unit length along ``axis``, in float64, first divided by its largest entry:
+    a tiny but non-zero vector has a direction too (1e-300 squared underflows to 0, and the plain
+    v / |v| gave inf and NaN)."""
+    v = np.asarray(v, dtype=np.float64)
+    largest = np.max(np.abs(v), axis=axis, keepdims=True)
+    v = v / np.where(largest > 0.0, largest, 1.0)
+    return v / np.linalg.norm(v, axis=axis, keepdims=True)
+
+
 @dataclass(frozen=True)
 class Point:
     """[x, y, z], or [x, z] for "rest on the terrain" -> (x, y or None, z)."""
@@ -357,19 +367,23 @@ def _broad_phases():
     return tuple(BROAD_PHASES)
 
 
+# Bounds past which a value would be accepted and then break something far from where it was
+# written: a step under 1 us (dt = 1e-300 overflowed the contact frequency 1 / (4 h) when squared)
+# or over 1 s (contacts softer than a quarter hertz); counts of sweeps or substeps in the billions
+# (a run "of 5 days" that never ends); a contact frequency of 1e-300 Hz (its square is 0).
 SIM_SCHEMA = {
-    "dt": Number(gt=0),
-    "substeps": Integer(ge=1),
+    "dt": Number(ge=1e-6, le=1.0),
+    "substeps": Integer(ge=1, le=4096),
     "gravity": Vector(3),
     "duration": Number(gt=0),
     "integrator": Choice(tuple(INTEGRATORS)),
     "rotation": Choice(tuple(ROTATIONS)),
     "device": Pattern(r"cpu|cuda(:\d+)?", "'cpu', 'cuda' or 'cuda:N'"),
     "seed": Integer(ge=0),
-    "iterations": Integer(ge=1),
-    "relax_iterations": Integer(ge=0),
-    "relax_passes": Integer(ge=1),
-    "contact_hertz": Number(gt=0),
+    "iterations": Integer(ge=1, le=1000),
+    "relax_iterations": Integer(ge=0, le=1000),
+    "relax_passes": Integer(ge=1, le=1000),
+    "contact_hertz": Number(ge=1e-3),
     "auto_substeps": Boolean(),
     "column_sag": Number(gt=0),
     "landing_depth": Number(gt=0),
