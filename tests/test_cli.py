@@ -133,6 +133,9 @@ BAD_RUNS = {
     "bad device": (TINY, ["--device", "gpu"], "--device must be cpu, cuda or cuda:N, got 'gpu'"),
     "missing out directory": (TINY, ["--out", "no/such/dir/run.npz"],
                               "directory 'no/such/dir' does not exist"),
+    "duration past any step count": (TINY, ["--duration", "1e308"], "is inf steps, more than 2,147,483,647"),
+    "substeps by the billion": ('[sim]\nsubsteps = 2147483648\n[[body]]\nshape = "sphere"\nradius = 0.1\n', [],
+                                "[sim] substeps must be an integer in [1, 4096], got 2147483648"),
 }
 
 
@@ -191,3 +194,17 @@ def test_module_entry_point(tiny, tmp_path):
     assert done.returncode == 2
     expected = f"error: {bad}: [[body]] #1 mass must be a positive finite number, got true"
     assert done.stderr.splitlines() == [expected]
+
+
+def test_one_file_for_two_jobs_is_refused(tiny, tmp_path, capsys):
+    """The recording overwrote a checkpoint written to the same file (resuming then failed with
+    'info is not a file in the archive'), and a run resumed into its own checkpoint destroyed it."""
+    out = tmp_path / "run.npz"
+    assert main(["run", str(tiny), "--quiet", "--steps", "2", "--checkpoint-every", "1", "--checkpoint", str(out),
+                 "--out", str(out)]) == 2
+    assert "--checkpoint and --out name the same file" in capsys.readouterr().err
+    check = tmp_path / "run.checkpoint.npz"
+    assert main(["run", str(tiny), "--quiet", "--steps", "2", "--checkpoint-every", "1", "--out", str(out)]) == 0
+    assert main(["run", str(tiny), "--quiet", "--steps", "4", "--resume", str(check), "--out", str(check)]) == 2
+    assert "--resume and --out name the same file" in capsys.readouterr().err
+    assert check.exists()
