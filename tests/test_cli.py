@@ -208,3 +208,25 @@ def test_one_file_for_two_jobs_is_refused(tiny, tmp_path, capsys):
     assert main(["run", str(tiny), "--quiet", "--steps", "4", "--resume", str(check), "--out", str(check)]) == 2
     assert "--resume and --out name the same file" in capsys.readouterr().err
     assert check.exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda info, arrays: info.update(step_count="abc"), "field step_count must be an integer >= 0, got 'abc'"),
+    (lambda info, arrays: info.update(step_count=-7), "field step_count must be an integer >= 0, got -7"),
+    (lambda info, arrays: info.pop("scene_text"), "field scene_text must be the scene's text, got None"),
+    (lambda info, arrays: arrays.pop("array_000"), "lacks the state array 'array_000'"),
+])
+def test_an_edited_checkpoint_is_named_not_a_traceback(tiny, tmp_path, capsys, edit, message):
+    """Edited checkpoints gave KeyError and AttributeError tracebacks, or resumed from step -7."""
+    out = tmp_path / "run.npz"
+    assert main(["run", str(tiny), "--quiet", "--steps", "2", "--checkpoint-every", "1", "--out", str(out)]) == 0
+    check = tmp_path / "run.checkpoint.npz"
+    with np.load(check) as data:
+        info = json.loads(str(data["info"]))
+        arrays = {key: data[key] for key in data.files if key != "info"}
+    edit(info, arrays)
+    np.savez(check, info=np.asarray(json.dumps(info)), **arrays)
+    capsys.readouterr()
+    assert main(["run", "--quiet", "--steps", "4", "--resume", str(check), "--out", str(tmp_path / "r2.npz")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and message in err, err

@@ -279,6 +279,11 @@ def _measured_arrays(sim) -> list:
     return [c.pair_count, c.pair_point_count] if c.pair_max > 0 else []
 
 
+CHECKPOINT_FIELDS = (("scene_text", str, "the scene's text"), ("step_count", int, "an integer >= 0"),
+                     ("total_steps", int, "an integer >= 0"), ("array_count", int, "an integer >= 0"),
+                     ("device", str, "a device name"))
+
+
 def load_checkpoint(path) -> tuple[dict, dict]:
     """(info, arrays) of a checkpoint file; ValueError when it is not one."""
     path = Path(path)
@@ -288,9 +293,20 @@ def load_checkpoint(path) -> tuple[dict, dict]:
             arrays = {key: data[key] for key in data.files if key != "info"}
     except (OSError, KeyError, ValueError, zipfile.BadZipFile) as e:
         raise ValueError(f"--resume: '{path}' is not a readable checkpoint file ({e})") from None
+    if not isinstance(info, dict):
+        raise ValueError(f"--resume: '{path}' is not a readable checkpoint file (its info is not a table)")
     if info.get("checkpoint_format") != CHECKPOINT_FORMAT:
         raise ValueError(f"--resume: '{path}' has checkpoint format {info.get('checkpoint_format')!r}, "
                          f"expected {CHECKPOINT_FORMAT}")
+    # what resuming reads, checked here so that an edited file is named, not a traceback or a wrong run
+    for key, kind, what in CHECKPOINT_FIELDS:
+        value = info.get(key)
+        if not isinstance(value, kind) or isinstance(value, bool) or (kind is int and value < 0):
+            raise ValueError(f"--resume: '{path}' field {key} must be {what}, got {value!r}")
+    needed = [f"array_{i:03d}" for i in range(info["array_count"])]
+    missing = [key for key in needed if key not in arrays]
+    if missing:
+        raise ValueError(f"--resume: '{path}' lacks the state array {missing[0]!r} its info announces")
     return info, arrays
 
 
