@@ -244,3 +244,24 @@ def test_update_settings_refuses_what_the_simulator_is_built_around(key, value):
         sim.update_settings(**{key: getattr(sim.config, key)})  # the value it was built with is no change
     with pytest.raises(ValueError, match="unknown simulation setting 'validate'"):
         sim.update_settings(validate=1)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(shape="sphere", size=[0.1, 0.1], mass=[1.0, 2.0, 3.0]), "size must be a number or 3 numbers"),
+    (dict(shape="sphere", size=[0.1, 0.1], friction=[0.1, 0.2, 0.3]), "friction must be a number or 2 numbers"),
+    (dict(shape="sphere", size=[0.1, 0.1], restitution=[0.1, 0.2, 0.3]), "restitution must be a number or 2"),
+    (dict(shape="sphere", size=[0.1, 0.1], static=[True, False, True]), "static must be one bool or 2"),
+    (dict(shape=["sphere", "box", "box"], size=[0.1, 0.1]), "size must be a number or 3 numbers"),
+    (dict(shape="sphere", size=[0.1, 0.1], position=[["a", 0, 0], [0, 0, 0]]), "position must be numbers"),
+    (dict(shape="box", size=[10**400, 1.0]), "size must be numbers"),
+    (dict(shape="sphere", size=[0.1, 0.1], mass=[True, True]), "mass must be numbers, got booleans"),
+    (dict(shape=np.array([True, False]), size=[0.1, 0.1]), "shape must be names (sphere, box) or codes"),
+])
+def test_add_bodies_names_the_column_at_fault(kwargs, message):
+    """Wrong lengths gave numpy's 'operands could not be broadcast together', strings and huge
+    integers numpy's and Python's own errors, naming no column; booleans were taken for masses
+    and shapes, which add_sphere refuses."""
+    with pytest.raises(ValueError) as e:
+        ModelBuilder().add_bodies(**kwargs)
+    assert message in str(e.value)
+    assert "broadcast" not in str(e.value)

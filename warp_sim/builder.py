@@ -273,6 +273,8 @@ class ModelBuilder:
             shapes = np.full(n, codes[shape], np.int32)
         else:
             raw = np.asarray(shape)
+            if raw.dtype == bool:
+                raise ValidationError("shape must be names (sphere, box) or codes 0 and 1, got booleans")
             if raw.dtype.kind in "US":
                 bad = ~np.isin(raw, list(codes))
                 if bad.any():
@@ -285,14 +287,16 @@ class ModelBuilder:
                     i = int(np.argmax(bad))
                     raise ValidationError(f"shape[{i}] must be 0 (sphere) or 1 (box), got {raw[i]!r}")
                 shapes = raw.astype(np.int32)
+            if shapes.ndim > 1 or (shapes.ndim == 1 and len(shapes) != n):
+                raise ValidationError(f"shape must be one shape or {n} (one a body), got shape {shapes.shape}")
             shapes = np.broadcast_to(shapes, (n,)).copy()
         is_sphere = shapes == SHAPE_SPHERE
 
-        raw_size = np.asarray(size, dtype=np.float64)
+        raw_size = self._numbers(size, "size")
         if raw_size.ndim == 2 and raw_size.shape[1] == 1:
             raw_size = raw_size[:, 0]
         if raw_size.ndim == 0 or (raw_size.ndim == 1 and len(raw_size) != 3):
-            sizes = np.repeat(np.broadcast_to(raw_size, (n,))[:, None], 3, axis=1)  # boxes: cubes
+            sizes = np.repeat(self._column(raw_size, n, "size")[:, None], 3, axis=1)  # boxes: cubes
         else:
             sizes = self._rows_of(raw_size, n, 3, "size").copy()
             # a sphere's row is (r, 0, 0) or (r, r, r); anything else in it was meant as something
@@ -308,7 +312,7 @@ class ModelBuilder:
         spec = BODY_SCHEMA
         check_array(spec["radius"], sizes[is_sphere, 0], "size (radius)")
         check_array(spec["half_extents"], sizes[~is_sphere], "size (half_extents)", rows=True)
-        masses = check_array(spec["mass"], np.broadcast_to(np.asarray(mass, np.float64), (n,)), "mass")
+        masses = check_array(spec["mass"], self._column(mass, n, "mass"), "mass")
         positions = check_array(spec["position"], self._rows_of(position, n, 3, "position"), "position", rows=True)
         orientations = check_array(spec["orientation"], self._rows_of((0, 0, 0, 1) if orientation is None
                                                                       else orientation, n, 4, "orientation"),
@@ -318,15 +322,15 @@ class ModelBuilder:
         omegas = check_array(spec["angular_velocity"],
                              self._rows_of((0, 0, 0) if angular_velocity is None else angular_velocity, n, 3,
                                            "angular_velocity"), "angular_velocity", rows=True)
-        rest = np.broadcast_to(np.asarray(self.material.restitution if restitution is None else restitution,
-                                          np.float64), (n,))
+        rest = self._column(self.material.restitution if restitution is None else restitution, n, "restitution")
         check_array(spec["restitution"], rest, "restitution")
-        fric = np.broadcast_to(np.asarray(self.material.effective_friction() if friction is None else friction,
-                                          np.float64), (n,))
+        fric = self._column(self.material.effective_friction() if friction is None else friction, n, "friction")
         check_array(spec["friction"], fric, "friction")
         statics = np.asarray(static)
         if statics.dtype != bool:
             raise ValidationError(f"static must be true or false (a bool or a bool array), got {statics.dtype}")
+        if statics.ndim > 1 or (statics.ndim == 1 and len(statics) != n):
+            raise ValidationError(f"static must be one bool or {n} (one a body), got shape {statics.shape}")
         check_derived(shapes, sizes, masses, index_base=0)
         first = self._count
         self._push_block({"shape": shapes, "size": sizes, "mass": masses, "position": positions,
@@ -351,8 +355,30 @@ class ModelBuilder:
                               "to give the body count")
 
     @staticmethod
-    def _rows_of(value, n: int, width: int, key: str) -> np.ndarray:
-        a = np.asarray(value, dtype=np.float64)
+    def _numbers(value, key: str) -> np.ndarray:
+        """``value`` as float64, or ValidationError naming ``key`` (strings and ints past float
+        range gave numpy's and Python's own errors, naming nothing)."""
+        try:
+            if np.asarray(value).dtype == bool:  # add_sphere refuses True for a mass too
+                raise ValidationError(f"{key} must be numbers, got booleans")
+            a = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError) as e:
+            if isinstance(e, ValidationError):
+                raise
+            raise ValidationError(f"{key} must be numbers, got {str(value)[:80]} ({e})") from None
+        return a
+
+    @classmethod
+    def _column(cls, value, n: int, key: str) -> np.ndarray:
+        """A scalar or an (n) array of numbers, as (n) float64; ValidationError naming ``key``."""
+        a = cls._numbers(value, key)
+        if a.ndim > 1 or (a.ndim == 1 and len(a) != n):
+            raise ValidationError(f"{key} must be a number or {n} numbers (one a body), got shape {a.shape}")
+        return np.broadcast_to(a, (n,))
+
+    @classmethod
+    def _rows_of(cls, value, n: int, width: int, key: str) -> np.ndarray:
+        a = cls._numbers(value, key)
         if a.shape == (width,):
             return np.broadcast_to(a, (n, width))
         if a.shape != (n, width):

@@ -29,8 +29,8 @@ import warp as wp
 from .commands import add_commands
 from .contacts import ContactOverflowError
 from .quiet import announce_compiles, init_warp, quiet_warp  # noqa: F401  (quiet_warp: old callers)
-from .recording import (RunWriter, check_output_path, chunk_dir, load_checkpoint, restore_checkpoint,
-                        save_checkpoint)
+from .recording import (RUN_FIELDS, RunWriter, check_info_fields, check_output_path, chunk_dir, load_checkpoint,
+                        restore_checkpoint, save_checkpoint)
 from .run import format_summary, run, static_record
 from .scene import SceneError, load_scene, parse_scene_text
 from .simulator import NonFiniteStateError, expected_steps
@@ -129,6 +129,7 @@ def run_command(args) -> int:
     if args.resume is not None:
         try:
             resume_info, resume_arrays = load_checkpoint(args.resume)
+            check_info_fields(resume_info, args.resume, RUN_FIELDS)
         except ValueError as e:
             raise CommandError(str(e)) from None
     if args.scene is not None:

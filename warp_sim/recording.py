@@ -279,9 +279,18 @@ def _measured_arrays(sim) -> list:
     return [c.pair_count, c.pair_point_count] if c.pair_max > 0 else []
 
 
-CHECKPOINT_FIELDS = (("scene_text", str, "the scene's text"), ("step_count", int, "an integer >= 0"),
-                     ("total_steps", int, "an integer >= 0"), ("array_count", int, "an integer >= 0"),
-                     ("device", str, "a device name"))
+# what restoring reads of every checkpoint's info; the command line's run reads RUN_FIELDS too
+CHECKPOINT_FIELDS = (("step_count", int, "an integer >= 0"), ("array_count", int, "an integer >= 0"))
+RUN_FIELDS = (("scene_text", str, "the scene's text"), ("total_steps", int, "an integer >= 0"),
+              ("device", str, "a device name"))
+
+
+def check_info_fields(info: dict, path, fields):
+    """ValueError naming the first of ``fields`` (key, type, what) that ``info`` lacks or holds wrong."""
+    for key, kind, what in fields:
+        value = info.get(key)
+        if not isinstance(value, kind) or isinstance(value, bool) or (kind is int and value < 0):
+            raise ValueError(f"--resume: '{path}' field {key} must be {what}, got {value!r}")
 
 
 def load_checkpoint(path) -> tuple[dict, dict]:
@@ -299,10 +308,7 @@ def load_checkpoint(path) -> tuple[dict, dict]:
         raise ValueError(f"--resume: '{path}' has checkpoint format {info.get('checkpoint_format')!r}, "
                          f"expected {CHECKPOINT_FORMAT}")
     # what resuming reads, checked here so that an edited file is named, not a traceback or a wrong run
-    for key, kind, what in CHECKPOINT_FIELDS:
-        value = info.get(key)
-        if not isinstance(value, kind) or isinstance(value, bool) or (kind is int and value < 0):
-            raise ValueError(f"--resume: '{path}' field {key} must be {what}, got {value!r}")
+    check_info_fields(info, path, CHECKPOINT_FIELDS)
     needed = [f"array_{i:03d}" for i in range(info["array_count"])]
     missing = [key for key in needed if key not in arrays]
     if missing:
