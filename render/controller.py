@@ -306,7 +306,11 @@ class DemoController:
     def _coerce(self, name: str, spec: Param, value):
         """Clean value or None; clamping leaves a note."""
         if spec.kind == "bool":
-            return bool(value)
+            # bool("false") is True: only real booleans (and 0 / 1) are taken
+            if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, float)) and value in (0, 1)):
+                return bool(value)
+            self.note(f"{name}: {value!r} is not true or false; unchanged")
+            return None
         if spec.kind == "choice":
             if value not in spec.choices:
                 self.note(f"{name}: {value!r} is not one of {', '.join(spec.choices)}; unchanged")
@@ -315,7 +319,7 @@ class DemoController:
         if spec.kind == "vec3":
             try:
                 vec = [float(v) for v in value]
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 vec = []
             if len(vec) != 3 or not all(math.isfinite(v) for v in vec):
                 self.note(f"{name}: needs three finite numbers, got {value!r}; unchanged")
@@ -326,7 +330,7 @@ class DemoController:
             return clamped
         try:
             number = float(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # float(10**400) overflows
             number = math.nan
         if not math.isfinite(number):
             self.note(f"{name}: {value!r} is not a finite number; unchanged")
@@ -425,7 +429,10 @@ class DemoController:
         self._timed(self.history.step_backward, count)
 
     def seek(self, step: int):
-        self._timed(self.history.seek, step)
+        if isinstance(step, bool) or not isinstance(step, (int, np.integer)):
+            self.note(f"seek: {step!r} is not a step number; unchanged")
+            return
+        self._timed(self.history.seek, int(step))
 
     def update(self) -> bool:
         """Advance one frame of play (``steps_per_frame`` steps) unless paused; True if stepped."""

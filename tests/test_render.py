@@ -424,6 +424,28 @@ def test_set_param_changes_the_simulation():
     assert len(c.recent_notes()) == 3
 
 
+def test_gui_values_that_raised_or_were_misread_leave_a_note():
+    """The controller never raises on a value: 10**400 overflowed float(), "false" turned the
+    switch on (bool("false") is True), seek("a") and a scene with dt = 1e-300 raised."""
+    c = DemoController(builtin_scene(), paused=True)
+    substeps, auto = c.sim.config.substeps, c.sim.config.auto_substeps
+    assert c.set_param("substeps", 10**400) == substeps
+    assert c.set_param("gravity", (0.0, -(10**400), 0.0)) == tuple(c.sim.config.gravity)
+    assert c.set_param("auto_substeps", "false") == auto
+    c.seek("a")
+    notes = c.recent_notes()
+    assert any("not a finite number" in n for n in notes) and any("not true or false" in n for n in notes)
+    assert any("seek" in n for n in notes)
+
+
+def test_a_scene_with_a_step_too_small_to_run_is_a_note(tmp_path):
+    c = DemoController(builtin_scene(), paused=True)
+    path = tmp_path / "tiny_dt.toml"
+    path.write_text('[sim]\ndt = 1e-300\n[[body]]\nshape = "sphere"\nradius = 0.1\n')
+    assert c.load_scene(path) is False
+    assert any("dt must be a number in [1e-06, 1]" in n for n in c.recent_notes())
+
+
 def test_auto_substeps_switch_reaches_the_substep_plan():
     """The Physics panel's auto substeps box: the shipped rain plans more substeps for its
     landings (column_sag.py); off, it runs exactly the substeps asked for."""

@@ -19,6 +19,8 @@ import os
 import sys
 from pathlib import Path
 
+HISTORY_MB_MAX = 1.0e9  # a petabyte of keyframes: past any machine, short of float overflow
+
 
 def parse_size(text: str) -> tuple[int, int]:
     try:
@@ -69,8 +71,8 @@ def check_arguments(args):
         raise ValueError(f"--frames must be an integer >= 1, got {args.frames}")
     if args.samples < 0:
         raise ValueError(f"--samples must be an integer >= 0, got {args.samples}")
-    if not (args.history_mb > 0 and args.history_mb < float("inf")):
-        raise ValueError(f"--history-mb must be a positive finite number, got {args.history_mb}")
+    if not (args.history_mb > 0 and args.history_mb <= HISTORY_MB_MAX):  # 1e308 MB overflowed the byte count
+        raise ValueError(f"--history-mb must be a number in (0, {HISTORY_MB_MAX:g}], got {args.history_mb}")
     if args.device is not None:
         check_device(args.device)
     if args.screenshot is not None:
