@@ -265,3 +265,31 @@ def test_add_bodies_names_the_column_at_fault(kwargs, message):
         ModelBuilder().add_bodies(**kwargs)
     assert message in str(e.value)
     assert "broadcast" not in str(e.value)
+
+
+def test_wrong_objects_and_foreign_snapshots_are_named():
+    """set_terrain('flat') and ModelBuilder(material='ice') failed later with AttributeError,
+    from_slope('a') with a TypeError; a snapshot of another scene was half copied, one with
+    step_count -3 accepted, and restore({}) raised KeyError."""
+    with pytest.raises(ValueError, match="terrain must be a FourierTerrain, PlaneTerrain or NoTerrain, got 'flat'"):
+        ModelBuilder().set_terrain("flat")
+    with pytest.raises(ValueError, match="material must be a Material, got 'ice'"):
+        ModelBuilder(material="ice")
+    with pytest.raises(ValueError, match="angle_deg must be a finite number, got 'a'"):
+        PlaneTerrain.from_slope("a")
+    one, two = ModelBuilder(), ModelBuilder()
+    one.add_sphere(0.1, position=(0.0, 1.0, 0.0))
+    for x in (0.0, 1.0):
+        two.add_sphere(0.1, position=(x, 1.0, 0.0))
+    sim, other = Simulator(one.finalize("cpu"), SimConfig()), Simulator(two.finalize("cpu"), SimConfig())
+    with pytest.raises(ValueError, match="taken of another scene or settings"):
+        sim.restore(other.snapshot())
+    with pytest.raises(ValueError, match="step_count must be an integer >= 0, got -3"):
+        sim.restore(dict(sim.snapshot(), step_count=-3))
+    with pytest.raises(ValueError, match="needs a dict from Simulator.snapshot"):
+        sim.restore({})
+    sim.step(3)
+    snap = sim.snapshot()
+    sim.step(2)
+    sim.restore(snap)
+    assert sim.step_count == 3

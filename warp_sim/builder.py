@@ -21,7 +21,7 @@ import numpy as np
 from .model import Model
 from .collide.covered_faces import covered_faces
 from .collide.terrain_contact import sphere_terrain_slots
-from .terrain import NoTerrain, PlaneTerrain, Terrain
+from .terrain import FourierTerrain, NoTerrain, PlaneTerrain, Terrain
 from .types import FRICTION_MODELS, FRICTION_SLIPPERINESS, SHAPE_BOX, SHAPE_SPHERE
 from .validation import (BODY_ORDERS, BODY_SCHEMA, MATERIAL_SCHEMA, Boolean, Choice, ValidationError, check,
                          check_array, check_fields, unit_rows)
@@ -158,6 +158,8 @@ class ModelBuilder:
     """Adds spheres and boxes, sets the terrain, then ``finalize`` uploads a Model."""
 
     def __init__(self, material: Material | None = None):
+        if material is not None and not isinstance(material, Material):
+            raise ValidationError(f"material must be a Material, got {material!r}")
         self.material = material or Material()
         self.terrain: Terrain = NoTerrain()
         self._blocks: list[dict] = []  # column blocks, one per add_bodies (or per run of single adds)
@@ -165,6 +167,8 @@ class ModelBuilder:
         self._count = 0
 
     def set_terrain(self, terrain: Terrain):
+        if not isinstance(terrain, (FourierTerrain, PlaneTerrain, NoTerrain)):
+            raise ValidationError(f"terrain must be a FourierTerrain, PlaneTerrain or NoTerrain, got {terrain!r}")
         self.terrain = terrain
 
     @property

@@ -477,9 +477,24 @@ class Simulator:
         return arrays
 
     def restore(self, snap: dict):
-        for dst, src in zip(self._persistent_arrays(), snap["arrays"]):
-            wp.copy(dst, src, count=min(dst.size, src.size))
-        self.step_count = snap["step_count"]
+        """Put back what ``snapshot()`` took, from this simulator or one built the same way;
+        ValueError naming what does not fit (another scene's snapshot was half copied before)."""
+        if not isinstance(snap, dict) or "arrays" not in snap or "step_count" not in snap:
+            raise ValueError("restore: needs a dict from Simulator.snapshot() (keys 'arrays' and 'step_count')")
+        step = snap["step_count"]
+        if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 0:
+            raise ValueError(f"restore: step_count must be an integer >= 0, got {step!r}")
+        targets = self._persistent_arrays()
+        if len(snap["arrays"]) != len(targets):
+            raise ValueError(f"restore: the snapshot holds {len(snap['arrays'])} arrays, this simulator "
+                             f"{len(targets)}: it was taken of another scene or settings")
+        for i, (dst, src) in enumerate(zip(targets, snap["arrays"])):
+            if tuple(src.shape) != tuple(dst.shape) or src.dtype != dst.dtype:
+                raise ValueError(f"restore: snapshot array {i} has shape {tuple(src.shape)}, this simulator's "
+                                 f"{tuple(dst.shape)}: it was taken of another scene or settings")
+        for dst, src in zip(targets, snap["arrays"]):
+            wp.copy(dst, src)
+        self.step_count = int(step)
 
     def _solver_settings(self) -> SolverSettings:
         """The config's solver settings, with the depth past which a contact is pushed back within

@@ -205,7 +205,9 @@ class PlaneTerrain:
     @staticmethod
     def from_slope(angle_deg: float, offset: float = 0.0) -> "PlaneTerrain":
         """A plane rising along +x by ``angle_deg``: down-slope is -x."""
-        a = math.radians(angle_deg)
+        from .validation import Number, check
+
+        a = math.radians(check(Number(), angle_deg, "angle_deg"))
         return PlaneTerrain(normal=(-math.sin(a), math.cos(a), 0.0), offset=offset)
 
 
