@@ -172,3 +172,20 @@ def test_export_errors(recorded, tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "none.npz" in err and "no such file" in err
     assert main(["export", str(out), "--csv", str(tmp_path / "no" / "x.csv")]) == 2
     assert "--csv: directory" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--terrain-extent", "inf"], "--terrain-extent must be a number of metres in (0, 1e+06], got inf"),
+    (["--terrain-resolution", "100000"], "--terrain-resolution must be an integer in [1, 4096], got 100000"),
+    (["--usd", "OUT/e.txt"], "--usd must name a .usd, .usda or .usdc file"),
+])
+def test_export_bounds_are_named(recorded, tmp_path, capsys, flags, message):
+    """An infinite extent wrote 49,671 NaN terrain points and exited 0; a 100000-point grid died in
+    numpy asking for 37 GB; a .txt path died in USD's own exception."""
+    _, out = recorded
+    flags = [f.replace("OUT", str(tmp_path)) for f in flags]
+    if "--usd" not in flags:
+        flags = ["--usd", str(tmp_path / "e.usda"), *flags]
+    assert main(["export", str(out), *flags]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and message in err, err

@@ -154,6 +154,10 @@ def info_command(args) -> int:
     return 0
 
 
+EXPORT_RESOLUTION_MAX = 4096
+EXPORT_EXTENT_MAX = 1.0e6  # [m] float32 positions are metre-coarse past a few thousand km
+
+
 def export_command(args) -> int:
     from .cli import CommandError
     from .export import export_csv, export_usd
@@ -161,10 +165,16 @@ def export_command(args) -> int:
 
     if not args.usd and not args.csv:
         raise CommandError("export needs --usd OUT.usd and/or --csv OUT.csv")
-    if args.terrain_resolution < 1:
-        raise CommandError(f"--terrain-resolution must be an integer >= 1, got {args.terrain_resolution}")
-    if args.terrain_extent is not None and not args.terrain_extent > 0:
-        raise CommandError(f"--terrain-extent must be a positive number of metres, got {args.terrain_extent}")
+    # a grid of N x N terrain points: 4096 is 16.8 M points (1.2 GB of USD text), 100000 asked for
+    # 37 GB and failed in numpy; an infinite extent wrote NaN points
+    if not 1 <= args.terrain_resolution <= EXPORT_RESOLUTION_MAX:
+        raise CommandError(f"--terrain-resolution must be an integer in [1, {EXPORT_RESOLUTION_MAX}], "
+                           f"got {args.terrain_resolution}")
+    if args.terrain_extent is not None and not 0 < args.terrain_extent <= EXPORT_EXTENT_MAX:
+        raise CommandError(f"--terrain-extent must be a number of metres in (0, {EXPORT_EXTENT_MAX:g}], "
+                           f"got {args.terrain_extent}")
+    if args.usd and Path(args.usd).suffix not in (".usd", ".usda", ".usdc"):
+        raise CommandError(f"--usd must name a .usd, .usda or .usdc file, got '{args.usd}'")
     for option, path in (("--usd", args.usd), ("--csv", args.csv)):
         if path and not Path(path).resolve().parent.is_dir():
             raise CommandError(f"{option}: directory '{Path(path).parent}' does not exist")
@@ -180,4 +190,9 @@ def export_command(args) -> int:
         raise CommandError(f"cannot write export: {e.strerror or e}: '{e.filename}'") from None
     except ValueError as e:  # RecordingError, or no USD modules
         raise CommandError(str(e)) from None
+    except Exception as e:  # noqa: BLE001  USD's own errors (pxr.Tf.ErrorException), e.g. an unwritable path
+        if type(e).__module__.startswith("pxr"):
+            reason = str(e).strip().splitlines()[-1].rsplit(" : ", 1)[-1].strip("' ")
+            raise CommandError(f"--usd: USD could not write '{args.usd}': {reason}") from None
+        raise
     return 0
