@@ -211,7 +211,7 @@ def test_settings_that_would_break_far_away_are_refused_by_name(key, value):
 
 
 def test_a_run_too_long_to_count_is_refused_by_name():
-    from warp_sim.simulator import expected_steps
+    from warp_sim.limits import expected_steps
 
     with pytest.raises(ValueError, match=r"duration = 1e\+308 s at dt = 0.0166667 s is inf steps"):
         expected_steps(1e308, 1.0 / 60.0)

@@ -33,7 +33,8 @@ from .recording import (RUN_FIELDS, RunWriter, check_info_fields, check_output_p
                         restore_checkpoint, save_checkpoint)
 from .run import format_summary, run, static_record
 from .scene import SceneError, load_scene, parse_scene_text
-from .simulator import NonFiniteStateError, expected_steps
+from .limits import expected_steps
+from .simulator import NonFiniteStateError
 
 
 class CommandError(ValueError):

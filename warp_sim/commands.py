@@ -120,7 +120,7 @@ def info_command(args) -> int:
     from .scene import load_scene
     from .types import SHAPE_SPHERE
 
-    from .simulator import expected_steps
+    from .limits import expected_steps
 
     scene = load_scene(args.scene)
     cfg = scene.config

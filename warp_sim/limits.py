@@ -245,3 +245,16 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
             warnings.warn(
                 f"{where}: spheres of radius {r:.3g} m span more than the shortest terrain wavelength "
                 f"({shortest:.3g} m); their {WIDE_SPHERE_SLOTS} contact searches can miss further bumps", stacklevel=3)
+
+
+STEP_COUNT_MAX = 2**31 - 1  # the step counter is an int32 on the device
+
+
+def expected_steps(duration: float, dt: float) -> int:
+    """Steps of ``dt`` that cover ``duration``; ValueError naming both where that is no count a run
+    can hold (``duration = 1e308`` overflowed int())."""
+    steps = duration / dt
+    if not math.isfinite(steps) or steps > STEP_COUNT_MAX:
+        raise ValueError(f"duration = {duration:g} s at dt = {dt:g} s is {steps:.3g} steps, more than "
+                         f"{STEP_COUNT_MAX:,} a run can count")
+    return max(1, int(math.ceil(steps - 1e-9)))

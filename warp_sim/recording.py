@@ -293,6 +293,23 @@ def check_info_fields(info: dict, path, fields):
             raise ValueError(f"--resume: '{path}' field {key} must be {what}, got {value!r}")
 
 
+def check_snapshot(snap, targets: list):
+    """ValueError unless ``snap`` is a Simulator.snapshot() whose arrays fit ``targets`` (another
+    scene's snapshot was half copied, one with step_count -3 accepted, {} a KeyError)."""
+    if not isinstance(snap, dict) or "arrays" not in snap or "step_count" not in snap:
+        raise ValueError("restore: needs a dict from Simulator.snapshot() (keys 'arrays' and 'step_count')")
+    step = snap["step_count"]
+    if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 0:
+        raise ValueError(f"restore: step_count must be an integer >= 0, got {step!r}")
+    if len(snap["arrays"]) != len(targets):
+        raise ValueError(f"restore: the snapshot holds {len(snap['arrays'])} arrays, this simulator "
+                         f"{len(targets)}: it was taken of another scene or settings")
+    for i, (dst, src) in enumerate(zip(targets, snap["arrays"])):
+        if tuple(src.shape) != tuple(dst.shape) or src.dtype != dst.dtype:
+            raise ValueError(f"restore: snapshot array {i} has shape {tuple(src.shape)}, this simulator's "
+                             f"{tuple(dst.shape)}: it was taken of another scene or settings")
+
+
 def load_checkpoint(path) -> tuple[dict, dict]:
     """(info, arrays) of a checkpoint file; ValueError when it is not one."""
     path = Path(path)

@@ -478,23 +478,14 @@ class Simulator:
 
     def restore(self, snap: dict):
         """Put back what ``snapshot()`` took, from this simulator or one built the same way;
-        ValueError naming what does not fit (another scene's snapshot was half copied before)."""
-        if not isinstance(snap, dict) or "arrays" not in snap or "step_count" not in snap:
-            raise ValueError("restore: needs a dict from Simulator.snapshot() (keys 'arrays' and 'step_count')")
-        step = snap["step_count"]
-        if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 0:
-            raise ValueError(f"restore: step_count must be an integer >= 0, got {step!r}")
+        ValueError naming what does not fit (recording.check_snapshot)."""
+        from .recording import check_snapshot
+
         targets = self._persistent_arrays()
-        if len(snap["arrays"]) != len(targets):
-            raise ValueError(f"restore: the snapshot holds {len(snap['arrays'])} arrays, this simulator "
-                             f"{len(targets)}: it was taken of another scene or settings")
-        for i, (dst, src) in enumerate(zip(targets, snap["arrays"])):
-            if tuple(src.shape) != tuple(dst.shape) or src.dtype != dst.dtype:
-                raise ValueError(f"restore: snapshot array {i} has shape {tuple(src.shape)}, this simulator's "
-                                 f"{tuple(dst.shape)}: it was taken of another scene or settings")
+        check_snapshot(snap, targets)
         for dst, src in zip(targets, snap["arrays"]):
             wp.copy(dst, src)
-        self.step_count = int(step)
+        self.step_count = int(snap["step_count"])
 
     def _solver_settings(self) -> SolverSettings:
         """The config's solver settings, with the depth past which a contact is pushed back within
@@ -621,14 +612,3 @@ class Simulator:
 
 # what Simulator.__init__ builds from (arrays, pipelines, the device): update_settings refuses them
 BUILD_SETTINGS = ("device", "body_contact", "contact_max", "sleep", "broad_phase", "pair_schedule", "graph")
-STEP_COUNT_MAX = 2**31 - 1  # the step counter is an int32 on the device
-
-
-def expected_steps(duration: float, dt: float) -> int:
-    """Steps of ``dt`` that cover ``duration``; ValueError naming both where that is no count a run
-    can hold (``duration = 1e308`` overflowed int())."""
-    steps = duration / dt
-    if not math.isfinite(steps) or steps > STEP_COUNT_MAX:
-        raise ValueError(f"duration = {duration:g} s at dt = {dt:g} s is {steps:.3g} steps, more than "
-                         f"{STEP_COUNT_MAX:,} a run can count")
-    return max(1, int(math.ceil(steps - 1e-9)))
