@@ -68,10 +68,11 @@ def test_estimate_is_not_below_what_a_build_takes():
     assert limits.estimate_bytes(n, n, 3)["total"] > 3 * host_bytes
 
 
+# within the [sim] bounds (dt >= 1e-6 s, substeps <= 4096, under 2^31 steps), still far too long
 LONG_RUNS = {
-    "tiny dt": ("dt = 1e-9", "[sim] duration = 5 s at dt = 1e-09 s is 5,000,000,000 steps of 4 substeps"),
-    "long duration": ("duration = 1e9", "[sim] duration = 1e+09 s at dt = 0.0166667 s is 60,000,000,000 steps"),
-    "many substeps": ("substeps = 100000000", "is 300 steps of 100,000,000 substeps for 1 bodies, roughly"),
+    "tiny dt": ("dt = 1e-6\nduration = 50.0", "[sim] duration = 50 s at dt = 1e-06 s is 50,000,000 steps of 4 substeps"),
+    "long duration": ("duration = 1e6", "[sim] duration = 1e+06 s at dt = 0.0166667 s is 60,000,000 steps"),
+    "many substeps": ("substeps = 4096\nduration = 100.0", "is 6,000 steps of 4,096 substeps for 1 bodies, roughly"),
 }
 
 
@@ -87,13 +88,13 @@ def test_absurd_runs_need_steps_or_yes(tmp_path, capsys, line, message):
 
 
 def test_confirmed_long_run_still_meets_the_disk_estimate(tmp_path, capsys):
-    """--yes on dt = 1e-9 no longer lists 5e9 frames in memory: the disk estimate refuses it."""
+    """--yes on 2e9 steps of dt = 1e-6 lists no 2e9 frames in memory: the disk estimate refuses it."""
     path = tmp_path / "s.toml"
-    path.write_text('[sim]\ndt = 1e-9\n[[body]]\nshape = "sphere"\nradius = 0.1\n')
+    path.write_text('[sim]\ndt = 1e-6\nduration = 2000.0\n[[body]]\nshape = "sphere"\nradius = 0.1\n')
     assert main(["run", str(path), "--yes", "--out", str(tmp_path / "r.npz"), "--quiet"]) == 2
     err = capsys.readouterr().err
     one_line(err)
-    assert "5,000,000,002 frames of 1 bodies take up to" in err and "--record-every" in err
+    assert "2,000,000,002 frames of 1 bodies take up to" in err and "--record-every" in err
 
 
 def test_terrain_frequency_float32_cannot_evaluate_is_refused():
