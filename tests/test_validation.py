@@ -293,3 +293,24 @@ def test_wrong_objects_and_foreign_snapshots_are_named():
     sim.step(2)
     sim.restore(snap)
     assert sim.step_count == 3
+
+
+def test_a_non_finite_step_names_every_body_it_reached():
+    """Two bodies at 1e38 and 3e38 m/s beside a healthy ball: both go non-finite in the first step,
+    and the error names the lower index and lists the other.  Every body of that step is named
+    because NaN can travel in it: in a scene of the input probe's, with a chain of two, a healthy
+    1 m/s ball of lower index went non-finite in the same step and was named alone."""
+    from warp_sim import NonFiniteStateError
+    from warp_sim.terrain import NoTerrain
+
+    b = ModelBuilder()
+    b.set_terrain(NoTerrain())
+    b.add_sphere(0.1, position=(0.0, 0.0, 0.0), velocity=(1.0, 0.0, 0.0))
+    b.add_box((0.1, 0.1, 0.1), position=(0.0, 5.0, 0.0), velocity=(1e38, 0.0, 0.0))
+    b.add_sphere(0.1, position=(0.0, 10.0, 0.0), velocity=(3e38, 0.0, 0.0))
+    sim = Simulator(b.finalize("cpu"), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False))
+    with pytest.raises(NonFiniteStateError) as e:
+        sim.step(3)
+    assert (e.value.body, *e.value.others) == (1, 2)
+    assert "body 1 (box) became non-finite at step 1" in str(e.value)
+    assert "with 1 other in that step (bodies 2)" in str(e.value)

@@ -12,10 +12,19 @@ from .validation import SIM_SCHEMA, check_fields
 
 
 class NonFiniteStateError(RuntimeError):
-    def __init__(self, body: int, step: int, time: float, shape: str):
-        super().__init__(f"body {body} ({shape}) became non-finite at step {step} (t = {time:.6g} s)")
+    """``body``: the lowest scene index among the bodies that went non-finite in the earliest bad
+    step; ``others``: the rest of them (a contact in that step can carry NaN from the body that
+    caused it to a healthy one of lower index, so all are named)."""
+
+    def __init__(self, body: int, step: int, time: float, shape: str, others: tuple = ()):
+        text = f"body {body} ({shape}) became non-finite at step {step} (t = {time:.6g} s)"
+        if others:
+            listed = ", ".join(str(b) for b in others[:5]) + (", ..." if len(others) > 5 else "")
+            text += f", with {len(others)} other{'s' if len(others) > 1 else ''} in that step (bodies {listed})"
+        super().__init__(text)
         self.body = body
         self.step = step
+        self.others = tuple(others)
 
 
 # The fields SimConfig hands to the solver under the same names (SimConfig.solver_settings).

@@ -436,10 +436,11 @@ class Simulator:
             return
         steps = self.body_bad_step.numpy()
         bad = np.flatnonzero(steps >= 0)  # named: of the earliest step's bodies, the lowest scene index
-        first = min(bad[steps[bad] == steps[bad].min()], key=self.model.body_scene_index.__getitem__)
+        earliest = sorted(self.model.body_scene_index[bad[steps[bad] == steps[bad].min()]].tolist())
+        first = int(self.model.body_internal_index[earliest[0]])
         step = int(steps[first]) + 1
         shape = "box" if self.model.host["body_shape"][first] == SHAPE_BOX else "sphere"
-        raise NonFiniteStateError(int(self.model.body_scene_index[first]), step, step * self.config.dt, shape)
+        raise NonFiniteStateError(earliest[0], step, step * self.config.dt, shape, tuple(earliest[1:]))
 
     def reset(self):
         self.states = [self.model.state(), self.model.state()]
