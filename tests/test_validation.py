@@ -81,8 +81,11 @@ def test_config_changed_after_construction_is_checked_by_the_simulator():
     b = ModelBuilder()
     b.add_sphere(0.1)
     config = SimConfig()
-    config.solver = "nope"
-    with pytest.raises(ValueError, match="SimConfig solver must be one of soft_step, pushout, got 'nope'"):
+    message = "SimConfig solver must be one of soft_step, pushout, got 'nope'"
+    with pytest.raises(ValueError, match=message):
+        config.solver = "nope"  # refused at once now (SimConfig.__setattr__)
+    object.__setattr__(config, "solver", "nope")  # and past that, by the simulator
+    with pytest.raises(ValueError, match=message):
         Simulator(b.finalize("cpu"), config)
 
 
@@ -314,3 +317,15 @@ def test_a_non_finite_step_names_every_body_it_reached():
     assert (e.value.body, *e.value.others) == (1, 2)
     assert "body 1 (box) became non-finite at step 1" in str(e.value)
     assert "with 1 other in that step (bodies 2)" in str(e.value)
+
+
+def test_config_fields_assigned_later_meet_the_same_rules():
+    """sim.config.dt = -1 ran time backwards and a NaN gravity set this way was ignored."""
+    b = ModelBuilder()
+    b.add_sphere(0.1, position=(0.0, 1.0, 0.0))
+    sim = Simulator(b.finalize("cpu"), SimConfig())
+    with pytest.raises(ValueError, match=r"SimConfig dt must be a number in \[1e-06, 1\], got -1"):
+        sim.config.dt = -1
+    with pytest.raises(ValueError, match="SimConfig gravity must be 3 finite numbers"):
+        sim.config.gravity = (0.0, float("nan"), 0.0)
+    assert sim.config.dt == pytest.approx(1.0 / 60.0)

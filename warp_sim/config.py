@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from .solvers.soft_step import CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES
 from .solvers.solver import SolverSettings
-from .validation import SIM_SCHEMA, check_fields
+from .validation import SIM_SCHEMA, check, check_fields
 
 
 class NonFiniteStateError(RuntimeError):
@@ -82,6 +82,17 @@ class SimConfig:
 
     def __post_init__(self):
         self.validate()
+
+    def __setattr__(self, name, value):
+        # a field assigned later is held to the same rules (sim.config.dt = -1 ran time backwards,
+        # a NaN gravity was ignored); Simulator.update_settings is still the way to change a
+        # running simulator's settings, as it also plans the substeps again
+        spec = SIM_SCHEMA.get(name)
+        if spec is not None and value is not None:
+            if name == "device" and not isinstance(value, str):
+                value = str(value)  # a wp.Device
+            value = check(spec, value, name, "SimConfig")
+        object.__setattr__(self, name, value)
 
     def validate(self):
         """Check every field with the [sim] rules (validation.SIM_SCHEMA); ValueError names the field."""
