@@ -134,6 +134,7 @@ BAD_RUNS = {
     "missing out directory": (TINY, ["--out", "no/such/dir/run.npz"],
                               "directory 'no/such/dir' does not exist"),
     "duration past any step count": (TINY, ["--duration", "1e308"], "is inf steps, more than 2,147,483,647"),
+    "empty device": (TINY, ["--device", ""], "--device must be cpu, cuda or cuda:N, got ''"),
     "substeps by the billion": ('[sim]\nsubsteps = 2147483648\n[[body]]\nshape = "sphere"\nradius = 0.1\n', [],
                                 "[sim] substeps must be an integer in [1, 4096], got 2147483648"),
 }
@@ -230,3 +231,11 @@ def test_an_edited_checkpoint_is_named_not_a_traceback(tiny, tmp_path, capsys, e
     assert main(["run", "--quiet", "--steps", "4", "--resume", str(check), "--out", str(tmp_path / "r2.npz")]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_a_scene_with_a_byte_order_mark_runs(tmp_path, capsys):
+    """Some editors start UTF-8 files with a BOM, which TOML does not allow: it was refused as
+    'Invalid statement (at line 1, column 1)'."""
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + TINY.encode())
+    assert main(["run", str(path), "--quiet", "--steps", "2", "--out", str(tmp_path / "r.npz")]) == 0

@@ -135,7 +135,7 @@ def run_command(args) -> int:
             raise CommandError(str(e)) from None
     if args.scene is not None:
         try:
-            scene_text = Path(args.scene).read_text(encoding="utf-8")
+            scene_text = Path(args.scene).read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError):
             scene_text = None  # load_scene reports it on one line
         scene = load_scene(args.scene)
@@ -147,7 +147,9 @@ def run_command(args) -> int:
         source = resume_info.get("scene_source", "<checkpoint scene>")
         scene = parse_scene_text(scene_text, source)
 
-    device = args.device or (resume_info["device"] if resume_info else scene.config.device)
+    # an empty --device is a bad value, not "not given"
+    device = args.device if args.device is not None else (resume_info["device"] if resume_info
+                                                          else scene.config.device)
     check_device(device)
     start = int(resume_info["step_count"]) if resume_info else 0
     if args.steps is not None:

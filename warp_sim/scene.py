@@ -130,7 +130,7 @@ def load_scene(path) -> Scene:
     except OSError as e:
         raise SceneError(f"cannot read scene file '{path}': {e.strerror or e}") from None
     try:
-        data = tomllib.loads(raw.decode("utf-8"))
+        data = tomllib.loads(raw.decode("utf-8-sig"))  # a byte-order mark (some editors write one) is no TOML
     except UnicodeDecodeError as e:
         raise SceneError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
     except tomllib.TOMLDecodeError as e:
