@@ -363,13 +363,12 @@ class ModelBuilder:
         """``value`` as float64, or ValidationError naming ``key`` (strings and ints past float
         range gave numpy's and Python's own errors, naming nothing)."""
         try:
-            if np.asarray(value).dtype == bool:  # add_sphere refuses True for a mass too
-                raise ValidationError(f"{key} must be numbers, got booleans")
-            a = np.asarray(value, dtype=np.float64)
+            raw = np.asarray(value)
+            a = raw.astype(np.float64)
         except (TypeError, ValueError, OverflowError) as e:
-            if isinstance(e, ValidationError):
-                raise
             raise ValidationError(f"{key} must be numbers, got {str(value)[:80]} ({e})") from None
+        if raw.dtype == bool:  # add_sphere refuses True for a mass too
+            raise ValidationError(f"{key} must be numbers, got booleans")
         return a
 
     @classmethod

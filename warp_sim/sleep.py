@@ -198,7 +198,7 @@ def update_sleep(
 
 class Sleep:
     def __init__(self, model, sleep_velocity: float, sleep_time: float, device, gravity_magnitude: float,
-                 closing_kick=(0.0, 0.0, 0.0)):
+                 closing_kick: tuple):
         """``closing_kick``: (1 - alpha) g h, the gravity the integrator adds after the substep's
         solve (module docstring)."""
         self.model = model

@@ -105,26 +105,25 @@ class FourierTerrain:
         gw = float(np.sum(a * self.frequency * n)) * self.scale[1] / self.scale[2]
         return math.hypot(gu, gw)
 
-    def curvature_bound(self) -> float:
-        """An upper bound of every second directional derivative of H, hence of the surface's
-        curvature (|H''| / (1 + H'^2)^(3/2) <= |H''|): |A| (f |k . e'|)^2 summed, as cubic_bound."""
-        k = self.terms
-        a = np.abs(self.amplitude_table())
-        m, n = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
-        reach = np.sqrt((m / self.scale[0]) ** 2 + (n / self.scale[2]) ** 2)
-        return float(np.sum(a * (self.frequency * reach) ** 2)) * abs(self.scale[1])
+    def directional_bound(self, order: int) -> float:
+        """An upper bound of every ``order``-th directional derivative of H (unit horizontal
+        direction e).
 
-    def cubic_bound(self) -> float:
-        """An upper bound of every third directional derivative of H (unit horizontal direction e).
-
-        d^3/ds^3 of A cos(f k . (e_x / s.x, e_z / s.z) s + ...) is at most |A| (f |k . e'|)^3, and
+        d^p/ds^p of A cos(f k . (e_x / s.x, e_z / s.z) s + ...) is at most |A| (f |k . e'|)^p, and
         |k . e'| <= sqrt(m^2 / s.x^2 + n^2 / s.z^2) (Cauchy-Schwarz); times s.y for world heights.
         """
         k = self.terms
         a = np.abs(self.amplitude_table())
         m, n = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
         reach = np.sqrt((m / self.scale[0]) ** 2 + (n / self.scale[2]) ** 2)
-        return float(np.sum(a * (self.frequency * reach) ** 3)) * abs(self.scale[1])
+        return float(np.sum(a * (self.frequency * reach) ** order)) * abs(self.scale[1])
+
+    def curvature_bound(self) -> float:
+        """Bounds the surface's curvature too: |H''| / (1 + H'^2)^(3/2) <= |H''|."""
+        return self.directional_bound(2)
+
+    def cubic_bound(self) -> float:
+        return self.directional_bound(3)
 
     def max_height_deviation(self) -> float:
         """sum |A| * s.y: no point of the surface lies further than this from o.y."""

@@ -188,6 +188,21 @@ def sphere_fourier_closest(
 
 
 @wp.func
+def sample_at(terrain: TerrainModel, xz: wp.vec2) -> HeightSample:
+    return fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
+                          terrain.terrain_scale, terrain.terrain_offset, xz[0], xz[1])
+
+
+@wp.func
+def closest_from(terrain: TerrainModel, center: wp.vec3, start: wp.vec2,
+                 start_sample: HeightSample) -> tuple[wp.vec2, HeightSample]:
+    """sphere_fourier_closest from ``start``, its reach the distance from the centre to that point."""
+    reach = wp.length(center - wp.vec3(start[0], start_sample.height, start[1]))
+    return sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
+                                  terrain.terrain_scale, terrain.terrain_offset, center, start, start_sample, reach)
+
+
+@wp.func
 def box_rise_bound(center: HeightSample, dx: float, dz: float, cubic_bound: float) -> float:
     """An upper bound of H(c + d) - H(c) for the horizontal offset d = (dx, dz) (Taylor, see above)."""
     quadratic = dx * dx * center.hess[0] + 2.0 * dx * dz * center.hess[1] + dz * dz * center.hess[2]
@@ -290,9 +305,7 @@ def collide_terrain(
                     elif k > 0:
                         seed = SEED_OFFSET * radius
                         start_xz = start_xz + seed * seed_direction(k)
-                    s0 = fourier_sample(terrain.terrain_coef, terrain.terrain_terms,
-                                        terrain.terrain_frequency, terrain.terrain_scale,
-                                        terrain.terrain_offset, start_xz[0], start_xz[1])
+                    s0 = sample_at(terrain, start_xz)
                     reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
                     can_touch = True
                     if contacts.terrain_contact_active[slot] == 0:
@@ -300,9 +313,7 @@ def collide_terrain(
                         lower_bound = (x[1] - s0.height - terrain.terrain_slope_bound * seed) / gap_scale
                         can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
                     if can_touch:
-                        xz, s = sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms,
-                                                       terrain.terrain_frequency, terrain.terrain_scale,
-                                                       terrain.terrain_offset, x, start_xz, s0, reach)
+                        xz, s = closest_from(terrain, x, start_xz, s0)
                         surface = wp.vec3(xz[0], s.height, xz[1])
                         if wp.length(x - surface) > reach:
                             # the search did not improve on its starting point: use that one
@@ -315,13 +326,7 @@ def collide_terrain(
                                 # a further slot stopped at a saddle of F: search again from its
                                 # downhill side and keep what lies nearer
                                 start_2 = xz + (ESCAPE_OFFSET * radius) * escape
-                                s_2 = fourier_sample(terrain.terrain_coef, terrain.terrain_terms,
-                                                     terrain.terrain_frequency, terrain.terrain_scale,
-                                                     terrain.terrain_offset, start_2[0], start_2[1])
-                                reach_2 = wp.length(x - wp.vec3(start_2[0], s_2.height, start_2[1]))
-                                xz_2, s_3 = sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms,
-                                                                   terrain.terrain_frequency, terrain.terrain_scale,
-                                                                   terrain.terrain_offset, x, start_2, s_2, reach_2)
+                                xz_2, s_3 = closest_from(terrain, x, start_2, sample_at(terrain, start_2))
                                 surface_2 = wp.vec3(xz_2[0], s_3.height, xz_2[1])
                                 if wp.length(x - surface_2) < wp.length(x - surface):
                                     xz = xz_2
