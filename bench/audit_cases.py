@@ -65,7 +65,7 @@ def pair_depth(sim: Simulator) -> float:
     """Deepest body-body penetration of the current state [m] (a fresh broad + narrow phase)."""
     if sim.pairs is None:
         return 0.0
-    return sim.pairs.probe_depth(sim.state, sim._probe)
+    return sim.pairs.probe_depth(sim.state, sim.probe_contacts())
 
 
 # 1. A sleeping body hit by an awake one ------------------------------------------------------

@@ -297,7 +297,7 @@ def test_a_layered_column_lands_within_the_landing_depth(count, gap, shape, seed
     deepest = 0.0
     for _ in range(100):
         sim.step(1)
-        deepest = max(deepest, sim.pairs.probe_depth(sim.state, sim._probe))
+        deepest = max(deepest, sim.pairs.probe_depth(sim.state, sim.probe_contacts()))
     assert deepest < sim.config.landing_depth, f"{deepest * 1000:.1f} mm ({sim.substep_plan.describe()})"
 
 

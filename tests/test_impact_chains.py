@@ -22,7 +22,7 @@ PLATE = (0.3, 0.1, 0.3)
 
 
 def deepest_pair(sim) -> float:
-    return sim.pairs.probe_depth(sim.state, sim._probe)
+    return sim.pairs.probe_depth(sim.state, sim.probe_contacts())
 
 
 @pytest.mark.parametrize("restitution", [0.1, 0.5])

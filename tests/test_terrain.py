@@ -132,7 +132,7 @@ def test_sphere_query_finds_the_true_closest_point(device):
     xz = rng.uniform(-10, 10, size=(60, 2))
     centers = np.stack([xz[:, 0], terrain.height(xz[:, 0], xz[:, 1]) + rng.uniform(-0.3, 0.6, 60), xz[:, 1]], 1)
     sim = sphere_sim(terrain, centers, radius, device)
-    probe = sim._probe
+    probe = sim.probe_contacts()
     sim.collide(sim.state, probe, 1.0 / 240.0, 10.0)
     start, count = sim.model.host["body_checkpoint_start"], sim.model.host["body_checkpoint_count"]
     assert np.all(count == 5)
@@ -154,7 +154,7 @@ def test_sphere_on_30_degree_plane_gets_exact_normal_and_depth(device):
     center = np.array([2.0, 0.0, 1.0])
     center = center - (center @ n) * n + n * (radius - 0.01)  # 1 cm into the plane
     sim = sphere_sim(plane, [center], radius, device)
-    probe = sim._probe
+    probe = sim.probe_contacts()
     sim.collide(sim.state, probe, 1.0 / 240.0, 0.0)
     assert probe.terrain_contact_active.numpy()[0] == 1
     assert probe.terrain_contact_depth.numpy()[0] == pytest.approx(0.01, abs=1e-6)

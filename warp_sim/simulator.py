@@ -136,7 +136,9 @@ class Simulator:
             capacity = config.contact_max or default_pair_capacity(model.body_count)
             self._make_pairs(capacity)
         self.contacts = model.contacts(capacity)
-        self._probe = model.contacts(capacity)
+        # max_penetration's scratch buffer: as large as the contacts, so made on first use only
+        # (a run that never asks for the diagnostic does not pay for it on the device)
+        self._probe = None
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
         self.outrun = wp.zeros(1, dtype=wp.int32, device=self.device)
         self.outrun_passes = wp.zeros(1, dtype=wp.int32, device=self.device)  # mid-step passes run, ever
@@ -424,7 +426,7 @@ class Simulator:
                       f"{capacity} pairs and the step redone", RuntimeWarning, stacklevel=4)
         self._make_pairs(capacity)
         self.contacts.grow_pairs(capacity)
-        self._probe = self.model.contacts(capacity)
+        self._probe = None
         self.invalidate_graph()
 
     def invalidate_graph(self):
@@ -580,15 +582,23 @@ class Simulator:
 
     def max_penetration(self) -> float:
         """Deepest penetration of the current state into the terrain or another body [m] (0 if none)."""
+        probe = self.probe_contacts()
         # start the probe's closest-point searches where the live contacts left off
-        wp.copy(self._probe.terrain_contact_active, self.contacts.terrain_contact_active)
-        wp.copy(self._probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
-        self.collide(self.state, self._probe, self.substep_dt, 0.0)
-        depths = self._probe.active_terrain_depths()
+        wp.copy(probe.terrain_contact_active, self.contacts.terrain_contact_active)
+        wp.copy(probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
+        self.collide(self.state, probe, self.substep_dt, 0.0)
+        depths = probe.active_terrain_depths()
         deepest = float(max(depths.max(), 0.0)) if depths.size else 0.0
         if self.pairs is not None:
-            deepest = max(deepest, self.pairs.probe_depth(self.state, self._probe))
+            deepest = max(deepest, self.pairs.probe_depth(self.state, probe))
         return deepest
+
+    def probe_contacts(self):
+        """A scratch Contacts buffer the size of the live one, for diagnostics that find contacts
+        without touching the solver's (max_penetration); made on first use."""
+        if self._probe is None or self._probe.pair_max != self.contacts.pair_max:
+            self._probe = self.model.contacts(self.contacts.pair_max)
+        return self._probe
 
     def contact_count(self) -> int:
         """Active contacts of the last substep (terrain slots in use plus body-body pairs)."""
