@@ -1,30 +1,34 @@
 """GPU benchmark in one prepared run (at most ~8 minutes on one H200), results after each part.
 
     python bench/gpu.py --out OUT [--device cuda:0] [--budget 450] [--quick]
+    python bench/gpu.py --compile-only --out OUT [--device cuda:0]   # fill the kernel cache, stop
 
-Parts, each appended to OUT/gpu.json, OUT/gpu.csv (one row per measurement) and OUT/gpu.png as
-soon as it finishes (a run cut short keeps what it measured):
+Parts, in the order they run (the figures that matter most first), each appended to
+OUT/gpu.json, OUT/gpu.csv (one row per measurement) and OUT/gpu.png as soon as it finishes
+(a run cut short keeps what it measured):
 
-0. compile: every kernel module loaded for the device on parallel threads (Warp compiles modules
+1. compile: every kernel module loaded for the device on parallel threads (Warp compiles modules
    one at a time on first use; a cold cache would otherwise cost minutes of the run);
-1. environment: Warp, device, memory, driver;
-2. capture: a mixed rain stepped with ``graph`` off and on;
+2. environment: Warp, device, memory, driver;
 3. spheres on the terrain (terrain contact only, dt 1/240, 1 substep), 1M;
-4. mixed bodies with body contact (dt 1/60, 4 substeps), 100k, 1M and 10M when memory allows;
-   per-kernel times (CUDA kernel timing, or the simulator's stage times on the CPU) and the
-   achieved GB/s against the byte model (bench/byte_model.py);
-5. determinism: two runs with sleeping on, state digests;
-6. device memory per body (every array the Simulator holds, and the device's own count);
+4. mixed bodies with body contact (dt 1/60, 4 substeps), 100k and 1M; per-kernel times (CUDA
+   kernel timing, or the simulator's stage times on the CPU) and the achieved GB/s against the
+   byte model (bench/byte_model.py);
+5. capture: a 100k mixed rain stepped with ``graph`` off and on;
+6. determinism: two runs with sleeping on, state digests;
 7. CPU against the device on a small scene (largest position difference);
-8. body order: the 1M mixed rain with its bodies listed in a random order, stored as listed and
-   sorted at build (``body_order = "shape_morton"``, warp_sim/body_order.py);
-9. Newton's SolverXPBD on the same rain, when ``import newton`` works.
+8. device memory per body (every array the Simulator holds, and the device's own count);
+9. 10M mixed bodies when memory allows (the 1M part's bytes per body, times 1.2, must be free);
+10. body order: the 1M mixed rain with its bodies listed in a random order, stored as listed and
+    sorted at build (``body_order = "shape_morton"``, warp_sim/body_order.py);
+11. Newton's SolverXPBD on the same rain, when ``import newton`` works.
 
 ``--quick`` shrinks every count (the CPU test runs it: ``--quick --device cpu``).  Scenes are
 built with a vectorised copy of cases.terrain_drop (``rain_model``, checked against it in the
 test), since the per-body ModelBuilder takes ~0.3 ms a body.  Each part checks the time left
 in ``--budget`` against an estimate from the parts before and is skipped, with the reason
-recorded, when it would not fit.
+recorded, when it would not fit; every stepping loop stops at a share of the time left
+(``Report.cap``), so a device slower than planned shortens the timings instead of the run.
 """
 
 from __future__ import annotations
@@ -150,8 +154,12 @@ def precompile(device: str) -> dict:
     return {"modules": names, "load_seconds": round(time.perf_counter() - start, 1)}
 
 
+GRAPH = {"default": None}  # None: the Simulator's own default (on for CUDA); the graph probe may turn it off
+
+
 def rain(count, shape, device, body_contact, **config) -> Simulator:
     config.setdefault("sleep", False)
+    config.setdefault("graph", GRAPH["default"])
     spacing = 0.9 if body_contact else 1.2
     return Simulator(rain_model(count, shape, device, spacing=spacing),
                      SimConfig(device=str(device), body_contact=body_contact, **config))
@@ -184,6 +192,29 @@ def timed_steps(sim, steps: int) -> float:
     sim.step(steps, check=False)
     wp.synchronize_device(sim.device)
     return (time.perf_counter() - start) / steps
+
+
+def step_for(sim, steps: int, cap: float) -> int:
+    """Run up to ``steps`` steps, stopping once ``cap`` seconds have passed; the steps run.  A step
+    that costs far more than planned (an untried device) then cannot eat the rest of the run."""
+    start, done = time.perf_counter(), 0
+    while done < steps:
+        chunk = max(1, min(steps - done, done))  # 1, 1, 2, 4, ...: few host syncs, quick stop
+        sim.step(chunk, check=False)
+        wp.synchronize_device(sim.device)
+        done += chunk
+        if time.perf_counter() - start > cap:
+            break
+    return done
+
+
+def measure(sim, steps: int, cap: float) -> tuple[float, int]:
+    """Seconds a step and the steps timed: one warm-up step (it captures the graph where one is
+    used), one step timed alone, then as many of ``steps`` as fit in ``cap`` seconds."""
+    sim.step(1, check=False)
+    one = timed_steps(sim, 1)
+    count = int(max(1, min(steps, cap / max(one, 1e-9))))
+    return timed_steps(sim, count), count
 
 
 def sim_bytes(sim) -> int:
@@ -241,6 +272,10 @@ class Report:
     def left(self) -> float:
         return self.budget - (time.perf_counter() - self.start)
 
+    def cap(self, share: float = 0.08, most: float = 20.0) -> float:
+        """Seconds one timed loop may take: a share of what is left, at most ``most``."""
+        return max(0.5, min(most, share * self.left()))
+
     def part(self, name: str, fn, estimate: float = 0.0):
         if self.left() < estimate:
             self.parts[name] = {"status": f"skipped: {self.left():.0f} s left, needs ~{estimate:.0f} s"}
@@ -294,12 +329,20 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cuda:0")
     p.add_argument("--budget", type=float, default=450.0, help="seconds for the whole run")
     p.add_argument("--quick", action="store_true", help="small counts (CPU test)")
+    p.add_argument("--compile-only", action="store_true",
+                   help="load every kernel module for --device and the CPU (fills the kernel cache) and stop")
     args = p.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
     if args.device.startswith("cuda") and not wp.is_cuda_available():
         print(f"error: --device {args.device} but no CUDA device is available", file=sys.stderr)
         return 2
+    if args.compile_only:
+        start = time.perf_counter()
+        for d in dict.fromkeys([args.device, "cpu"]):
+            print(f"[gpu.py] {d}: {precompile(d)['load_seconds']} s", flush=True)
+        print(f"[gpu.py] kernel cache filled in {time.perf_counter() - start:.0f} s")
+        return 0
     device = wp.get_device(args.device)
     size = QUICK if args.quick else FULL
     steps = size["steps"]
@@ -311,37 +354,43 @@ def main(argv=None) -> int:
         info = machine_info(args.device)
         if device.is_cuda:
             info.update(total_memory_gb=round(device.total_memory / 2**30, 1), arch=device.arch,
-                        driver=wp.get_cuda_driver_version())
+                        driver=wp.get_cuda_driver_version(), free_memory_gb=round(device.free_memory / 2**30, 1))
         return info
 
     report.part("environment", environment)
 
-    def capture():
-        out = {}
+    def graph_probe():
+        """A small mixed rain with sleeping, stepped directly and replayed from a captured graph:
+        equal bit for bit is the capture contract; a capture that fails turns graphs off for the
+        parts after this one (so one broken capture does not void every figure), and says so."""
+        states = {}
         for graph in (False, True):
-            sim = rain(size["capture"], "mix", device, True, graph=graph)
-            sim.step(2, check=False)
-            sec = timed_steps(sim, steps)
-            out[f"graph_{str(graph).lower()}_ms"] = round(1000 * sec, 3)
-            report.row(part="capture", bodies=size["capture"], variant=f"graph={graph}", ms_per_step=round(1000 * sec, 3),
-                       steps_per_s=round(1 / sec, 2))
-        return out
+            sim = rain(size["determinism"] // 10 or 30, "mix", device, True, sleep=True, graph=graph)
+            try:
+                sim.step(20, check=False)
+            except Exception as e:
+                if not graph:
+                    raise
+                GRAPH["default"] = False
+                return {"capture": f"failed: {type(e).__name__}: {e}", "graph_for_later_parts": False}
+            states[graph] = digest(sim)
+        return {"direct": states[False], "replayed": states[True], "identical": states[False] == states[True],
+                "graph_for_later_parts": GRAPH["default"] is not False}
 
-    report.part("capture", capture, estimate=10)
+    report.part("graph_probe", graph_probe)
 
     def spheres():
         n = size["spheres"]
         t = time.perf_counter()
         sim = rain(n, "sphere", device, False, dt=1 / 240, substeps=1)
         per_body_s["spheres"] = (time.perf_counter() - t) / n
-        sim.step(2, check=False)
-        sec = timed_steps(sim, 4 * steps)
+        sec, timed = measure(sim, 4 * steps, report.cap())
         model = per_body_step(sim)
         gbs = model["total"] * n / sec / 1e9
         report.row(part="spheres_terrain", bodies=n, variant="dt 1/240", ms_per_step=round(1000 * sec, 4),
                    steps_per_s=round(1 / sec, 1), bytes_per_body_step=round(model["total"]), achieved_gb_s=round(gbs, 1))
-        return {"bodies": n, "steps_per_s": round(1 / sec, 1), "byte_model": model, "achieved_gb_s": round(gbs, 1),
-                "kernels_ms": kernel_times(sim, steps)}
+        return {"bodies": n, "steps_timed": timed, "steps_per_s": round(1 / sec, 1), "byte_model": model,
+                "achieved_gb_s": round(gbs, 1), "kernels_ms": kernel_times(sim, 2)}
 
     report.part("spheres_terrain", spheres, estimate=size["spheres"] * 1e-5)
 
@@ -352,8 +401,8 @@ def main(argv=None) -> int:
             t = time.perf_counter()
             sim = rain(n, "mix", device, True)
             per_body_s["mixed"] = (time.perf_counter() - t) / n
-            sim.step(size["settle"], check=False)  # landed: pairs to solve
-            sec = timed_steps(sim, steps)
+            settled = step_for(sim, size["settle"], report.cap())  # landed: pairs to solve
+            sec, timed = measure(sim, steps, report.cap())
             model = per_body_step(sim)
             gbs = model["total"] * n / sec / 1e9
             mem = sim_bytes(sim)
@@ -361,33 +410,48 @@ def main(argv=None) -> int:
                        steps_per_s=round(1 / sec, 2), bytes_per_body_step=round(model["total"]),
                        achieved_gb_s=round(gbs, 1), bytes_per_body=round(mem / n))
             mixed_results[n] = mem / n
-            return {"bodies": n, "steps_per_s": round(1 / sec, 2), "byte_model": model, "achieved_gb_s": round(gbs, 1),
-                    "pairs": int(sim.contacts.pair_count.numpy()[0]), "capacity": sim.pairs.capacity,
-                    "bytes_per_body": round(mem / n), "kernels_ms": kernel_times(sim, max(1, steps // 4))}
+            out = {"bodies": n, "settle_steps": settled, "steps_timed": timed, "steps_per_s": round(1 / sec, 2),
+                   "byte_model": model, "achieved_gb_s": round(gbs, 1),
+                   "pairs": int(sim.contacts.pair_count.numpy()[0]), "capacity": sim.pairs.capacity,
+                   "bytes_per_body": round(mem / n), "kernels_ms": kernel_times(sim, 1)}
+            if device.is_cuda:
+                out["device_free_gb_after"] = round(device.free_memory / 2**30, 1)
+            return out
         return run
 
-    for n in size["mixed"]:
-        fits = ""
+    def mixed_part(n):
         if mixed_results and device.is_cuda:
             need = max(mixed_results.values()) * n * 1.2
             if need > device.free_memory:
-                fits = f"skipped: needs ~{need / 2**30:.0f} GiB, {device.free_memory / 2**30:.0f} GiB free"
-        if fits:
-            report.parts[f"mixed_{n}"] = {"status": fits}
-            report.write()
-            continue
+                report.parts[f"mixed_{n}"] = {
+                    "status": f"skipped: needs ~{need / 2**30:.0f} GiB, {device.free_memory / 2**30:.0f} GiB free"}
+                report.write()
+                return
+        # build, settle and time, each capped: about 3 builds' worth
         report.part(f"mixed_{n}", mixed(n), estimate=n * per_body_s["mixed"] * 3)
 
+    def capture():
+        out = {}
+        for graph in (False, True):
+            sim = rain(size["capture"], "mix", device, True, graph=graph)
+            sec, timed = measure(sim, steps, report.cap(most=10))
+            out[f"graph_{str(graph).lower()}_ms"] = round(1000 * sec, 3)
+            report.row(part="capture", bodies=size["capture"], variant=f"graph={graph}", ms_per_step=round(1000 * sec, 3),
+                       steps_per_s=round(1 / sec, 2))
+        return out
+
     def determinism():
-        digests = []
+        digests, counts = [], []
         for _ in range(2):
             sim = rain(size["determinism"], "mix", device, True, sleep=True)
-            sim.step(3 * steps, check=False)
+            if counts:  # the second run takes exactly the first run's steps
+                sim.step(counts[0], check=False)
+            else:
+                counts.append(step_for(sim, 3 * steps, report.cap()))
             digests.append(digest(sim))
             awake = sim.awake_count()
-        return {"digests": digests, "identical": digests[0] == digests[1], "awake_at_end": awake}
-
-    report.part("determinism", determinism, estimate=size["determinism"] * per_body_s["mixed"] * 4)
+        return {"steps": counts[0], "digests": digests, "identical": digests[0] == digests[1], "awake_at_end": awake,
+                "bodies": size["determinism"]}
 
     def memory():
         n = size["capture"]
@@ -400,8 +464,6 @@ def main(argv=None) -> int:
         out["mixed_bytes_per_body"] = {str(k): round(v) for k, v in mixed_results.items()}
         return out
 
-    report.part("memory", memory, estimate=5)
-
     def compare():
         n = size["compare"]
         pos = {}
@@ -412,24 +474,19 @@ def main(argv=None) -> int:
         diff = float(np.abs(pos["cpu"] - pos[str(device)]).max())
         return {"bodies": n, "steps": steps, "max_position_difference_m": diff}
 
-    report.part("cpu_vs_device", compare, estimate=20)
-
     def orders():
         n = size["order"]
         out = {"bodies": n}
         for mode in ("scene", "shape_morton"):
             variant = "random order" + (", shape_morton" if mode != "scene" else "")
             sim = shuffled_rain(n, device, mode)
-            sim.step(size["settle"], check=False)
-            sec = timed_steps(sim, steps)
+            step_for(sim, size["settle"], report.cap(most=10))
+            sec, timed = measure(sim, steps, report.cap(most=10))
             report.row(part="body_order", bodies=n, variant=variant, ms_per_step=round(1000 * sec, 3),
                        steps_per_s=round(1 / sec, 2))
             out[f"{mode}_ms"] = round(1000 * sec, 3)
             del sim  # free the first rain's device memory before the second is built
         return out
-
-    # two builds and settles of the mixed rain at this size, as the mixed parts measured them
-    report.part("body_order", orders, estimate=2 * size["order"] * per_body_s["mixed"] * 3)
 
     def newton_rain():
         try:
@@ -450,6 +507,17 @@ def main(argv=None) -> int:
                    steps_per_s=round(1 / sec, 1))
         return {"available": True, "bodies": size["newton"], "steps_per_s": round(1 / sec, 1), "settings": engine.settings}
 
+    # most wanted first: a run cut short by its budget keeps the figures that matter most
+    *smaller, largest = size["mixed"]
+    for n in smaller:
+        mixed_part(n)
+    report.part("capture", capture, estimate=10)
+    report.part("determinism", determinism, estimate=size["determinism"] * per_body_s["mixed"] * 4)
+    report.part("cpu_vs_device", compare, estimate=20)
+    report.part("memory", memory, estimate=5)
+    mixed_part(largest)
+    # two builds and settles of the mixed rain at this size, as the mixed parts measured them
+    report.part("body_order", orders, estimate=2 * size["order"] * per_body_s["mixed"] * 3)
     report.part("newton", newton_rain, estimate=30)
     print(f"[gpu.py] wrote {args.out}/gpu.json, gpu.csv, gpu.png in {time.perf_counter() - report.start:.0f} s")
     return 0

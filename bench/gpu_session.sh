@@ -8,19 +8,23 @@
 #
 #   bash .device/p3/install.sh && export PYTHONPATH=/tmp/site:$PWD && bash bench/gpu_session.sh
 #
+# 0. bench/gpu.py --compile-only: every kernel module compiled for the device (NVRTC) and the CPU
+#    on parallel threads, into the kernel cache the later steps load from (tests launching
+#    modules one by one would otherwise spend their budget compiling).
 # 1. Every test that takes ``device`` (tests/conftest.py), run with --cuda and only its cuda:0
-#    instances (the CPU ones ran in CI); the test run gets TEST_BUDGET seconds, its log and
-#    junit XML land in $OUT first, so a cut-off run still reports what it ran.  The first test to
-#    launch a module compiles it with NVRTC, which warms the kernel cache for step 2.
+#    instances (the CPU ones ran in CI), on 8 workers where pytest-xdist is installed; the run
+#    gets TEST_BUDGET seconds and is then interrupted (SIGINT), so pytest still writes its
+#    summary and junit XML into $OUT.
 # 2. bench/gpu.py --device cuda:0 with what is left of CALL_BUDGET (it skips a part that would
-#    not fit, and writes gpu.json / gpu.csv / gpu.png after each part).
+#    not fit, caps every stepping loop, and writes gpu.json / gpu.csv / gpu.png after each part).
 #
-# CALL_BUDGET leaves a minute of the 600 s a command may run for the transfers back.
+# At most 7 files land in $OUT (a lent machine returns 8).  CALL_BUDGET leaves about a minute of
+# the command's limit for the transfers back: give the call timeout_s = CALL_BUDGET + 60.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-${1:-/tmp/gpu_session}}
-CALL_BUDGET=${CALL_BUDGET:-540}
-TEST_BUDGET=${TEST_BUDGET:-150}
+CALL_BUDGET=${CALL_BUDGET:-520}
+TEST_BUDGET=${TEST_BUDGET:-140}
 DEVICE=${DEVICE:-cuda:0}
 GPU_ARGS=${GPU_ARGS:-}  # e.g. --quick, for a dry run on the CPU: DEVICE=cpu GPU_ARGS=--quick
 export PYTHONUNBUFFERED=1
@@ -47,10 +51,13 @@ for path in sorted(pathlib.Path("tests").glob("test_*.py")):
 PYEOF
 )
 files=$(echo $files)
-echo "[$(elapsed) s] tests on $DEVICE: $files"
-timeout "$TEST_BUDGET" python3 -m pytest -q -p no:cacheprovider --cuda -k "cuda" -rfEs \
-    --junitxml "$OUT/cuda_tests.xml" $files 2>&1 | tee "$OUT/cuda_tests.txt"
-echo "[$(elapsed) s] tests exit status ${PIPESTATUS[0]} (124: cut off at $TEST_BUDGET s)"
+timeout 150 python3 bench/gpu.py --compile-only --device "$DEVICE" --out "$OUT" 2>&1 | tee -a "$OUT/environment.txt"
+workers=""
+python3 -c "import xdist" 2>/dev/null && workers="-n 8"
+echo "[$(elapsed) s] tests on $DEVICE ${workers:-(one process)}: $files"
+timeout -s INT -k 20 "$TEST_BUDGET" python3 -m pytest -q -p no:cacheprovider $workers --cuda -k "cuda" -rfEs \
+    --durations=10 --junitxml "$OUT/cuda_tests.xml" $files 2>&1 | tee "$OUT/cuda_tests.txt"
+echo "[$(elapsed) s] tests exit status ${PIPESTATUS[0]} (2 or 124: cut off at $TEST_BUDGET s)"
 
 left=$(( CALL_BUDGET - $(elapsed) ))
 if [ "$left" -lt 60 ]; then
@@ -58,5 +65,6 @@ if [ "$left" -lt 60 ]; then
     exit 0
 fi
 echo "[$(elapsed) s] bench/gpu.py with a budget of $left s"
-python3 bench/gpu.py --out "$OUT" --device "$DEVICE" --budget "$left" $GPU_ARGS 2>&1 | tee "$OUT/gpu_log.txt"
+timeout -k 10 $(( left + 30 )) python3 bench/gpu.py --out "$OUT" --device "$DEVICE" --budget "$left" $GPU_ARGS \
+    2>&1 | tee "$OUT/gpu_log.txt"
 echo "[$(elapsed) s] done"

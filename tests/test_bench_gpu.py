@@ -32,10 +32,11 @@ def test_quick_run_writes_every_part(tmp_path):
     assert gpu.main(["--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "gpu.json").read_text())
     parts = result["parts"]
-    for name in ("compile", "environment", "capture", "spheres_terrain", "mixed_500", "mixed_2000", "determinism", "memory",
+    for name in ("compile", "environment", "graph_probe", "capture", "spheres_terrain", "mixed_500", "mixed_2000", "determinism", "memory",
                  "cpu_vs_device", "body_order", "newton"):
         assert parts[name]["status"] == "ok", (name, parts[name])
     assert parts["determinism"]["identical"]
+    assert parts["graph_probe"]["identical"] and parts["graph_probe"]["graph_for_later_parts"]
     assert parts["spheres_terrain"]["byte_model"]["total"] > 0
     assert parts["memory"]["simulator_bytes_per_body"] > 0
     assert (tmp_path / "gpu.csv").read_text().count("\n") >= 5
@@ -76,7 +77,7 @@ def test_the_device_session_dry_run_lists_the_device_tests_and_runs_the_benchmar
     out = subprocess.run(["bash", str(root / "bench" / "gpu_session.sh")], env=env, capture_output=True,
                          text=True, timeout=300)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
-    listed = next(line for line in out.stdout.splitlines() if "tests on cpu:" in line)
+    listed = next(line for line in out.stdout.splitlines() if "tests on cpu" in line)
     for name in ("test_impacts.py", "test_contact_laws.py", "test_body_contact.py", "test_push_out.py"):
         assert name in listed
     assert "test_races.py" not in listed  # CPU thread chunking: no device parameter

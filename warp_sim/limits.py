@@ -108,11 +108,11 @@ def estimate_bytes(bodies: int, boxes: int = 0, per_edge: int = 3, pair_capacity
     return parts
 
 
-def check_memory(need: int, what: str, available: int | None = None):
+def check_memory(need: int, what: str, available: int | None = None, where: str = "this machine"):
     """ValueError naming ``what`` (the key and its value) when ``need`` bytes will not fit."""
     have = available_memory() if available is None else available
     if need > SAFETY * have:
-        raise ValidationError(f"{what} needs about {human_bytes(need)} of memory, more than this machine has "
+        raise ValidationError(f"{what} needs about {human_bytes(need)} of memory, more than {where} has "
                               f"available ({human_bytes(have)})")
 
 
@@ -159,7 +159,15 @@ def check_simulator_memory(model, config):
     parts = estimate_bytes(n, boxes, model.host.get("checkpoints_per_edge", 3), capacity)
     what = (f"SimConfig contact_max = {config.contact_max}: the simulator" if config.contact_max and
             parts["contact pairs"] >= parts["bodies"] else f"a simulator of {n:,} bodies")
-    check_memory(parts["total"], what)
+    import warp as wp
+
+    device = wp.get_device(config.device)
+    # on a GPU the contact buffers and per-body arrays live in the device's memory: that is the
+    # limit (the estimate's host share makes it err on the safe side)
+    if device.is_cuda:
+        check_memory(parts["total"], what, device.free_memory, f"{device.alias} ({device.name})")
+    else:
+        check_memory(parts["total"], what)
 
 
 def estimate_run_seconds(steps: int, substeps: int, bodies: int) -> float:
