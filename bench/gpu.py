@@ -2,6 +2,7 @@
 
     python bench/gpu.py --out OUT [--device cuda:0] [--budget 450] [--quick]
     python bench/gpu.py --compile-only --out OUT [--device cuda:0]   # fill the kernel cache, stop
+    python bench/gpu.py --out OUT --parts spheres_terrain,mixed_1000000,capture   # some parts only
 
 Parts, in the order they run (the figures that matter most first), each appended to
 OUT/gpu.json, OUT/gpu.csv (one row per measurement) and OUT/gpu.png as soon as it finishes
@@ -261,9 +262,10 @@ def kernel_times(sim, steps: int) -> dict[str, float]:
 
 
 class Report:
-    def __init__(self, out: Path, budget: float):
+    def __init__(self, out: Path, budget: float, only: set[str] | None = None):
         self.out = out
         self.budget = budget
+        self.only = only  # part names to run (None: all)
         self.start = time.perf_counter()
         self.parts: dict[str, dict] = {}
         self.rows: list[dict] = []
@@ -277,7 +279,9 @@ class Report:
         return max(0.5, min(most, share * self.left()))
 
     def part(self, name: str, fn, estimate: float = 0.0):
-        if self.left() < estimate:
+        if self.only is not None and name not in self.only:
+            self.parts[name] = {"status": "skipped: not in --parts"}
+        elif self.left() < estimate:
             self.parts[name] = {"status": f"skipped: {self.left():.0f} s left, needs ~{estimate:.0f} s"}
         else:
             t = time.perf_counter()
@@ -329,6 +333,8 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cuda:0")
     p.add_argument("--budget", type=float, default=450.0, help="seconds for the whole run")
     p.add_argument("--quick", action="store_true", help="small counts (CPU test)")
+    p.add_argument("--parts", default="", help="comma-separated part names to run (default: all); compile and "
+                   "environment always run")
     p.add_argument("--compile-only", action="store_true",
                    help="load every kernel module for --device and the CPU (fills the kernel cache) and stop")
     args = p.parse_args(argv)
@@ -346,7 +352,8 @@ def main(argv=None) -> int:
     device = wp.get_device(args.device)
     size = QUICK if args.quick else FULL
     steps = size["steps"]
-    report = Report(args.out, args.budget)
+    only = {"compile", "environment", *args.parts.split(",")} if args.parts else None
+    report = Report(args.out, args.budget, only)
     report.part("compile", lambda: precompile(args.device))
     per_body_s = {"mixed": 3e-6, "spheres": 1e-6}  # host build + upload per body, updated as parts run
 

@@ -226,3 +226,12 @@ def probe(
 def test_no_module_is_overlong():
     long = {str(p.relative_to(ROOT)): n for p in modules(PACKAGE) if (n := len(p.read_text().split("\n"))) > MAX_LINES}
     assert not long
+
+
+def test_no_step_uses_a_native_scan_that_allocates_on_cuda():
+    """``wp.utils.array_scan`` allocates CUB's temporary storage on every CUDA call; inside a
+    conditional graph body that allocation is refused (every scene with body contact failed its
+    first captured step on an H200 this way).  Scans go through warp_sim/prefix_sum.py."""
+    users = [str(p.relative_to(ROOT)) for p in modules(PACKAGE)
+             if p.name != "prefix_sum.py" and re.search(r"\barray_scan\s*\(", p.read_text())]
+    assert not users

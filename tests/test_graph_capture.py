@@ -90,3 +90,51 @@ def test_pair_overflow_grows_the_buffers_and_redoes_the_step(monkeypatch, graph,
     reference.step(3)
     assert small.pairs.capacity >= int(small.contacts.pair_demand.numpy()[0]) > 16
     assert digest(small) == digest(reference)  # no contact was lost on the way
+
+
+def test_no_array_is_allocated_inside_a_conditional_graph_body(monkeypatch):
+    """CUDA refuses an allocation inside a conditional body (``wp.capture_if``: the mid-step pair
+    pass, the pass after a wake, the overflow colour's stage): "Conditional body graph contains
+    an unsupported operation (memory allocation)".  On the CPU that is not an error, so every
+    allocation made while a body is being captured is recorded here: a sleeping stack struck by
+    a bouncing ball, and a restitution rain (impacts, mid-step passes), captured on the CPU.
+    Native temporaries (``wp.utils.array_scan``'s) are kept out by test_architecture."""
+    import warp as wp
+    from warp._src import context
+
+    inside, made, entered = [0], [], [0]
+    allocate = context.CpuDefaultAllocator.allocate
+
+    def recording_allocate(self, size):
+        if inside[0]:
+            made.append(size)
+        return allocate(self, size)
+
+    capture_if = wp.capture_if
+
+    def watched_capture_if(condition, on_true=None, on_false=None, **kwargs):
+        def watch(body):
+            if not callable(body):
+                return body
+
+            def run(**args):
+                inside[0] += 1
+                entered[0] += 1
+                try:
+                    return body(**args)
+                finally:
+                    inside[0] -= 1
+            return run
+        return capture_if(condition, on_true=watch(on_true), on_false=watch(on_false), **kwargs)
+
+    monkeypatch.setattr(context.CpuDefaultAllocator, "allocate", recording_allocate)
+    monkeypatch.setattr(wp, "capture_if", watched_capture_if)
+    from warp_sim import cases
+
+    for sim in (sleeping_stack(graph=True),
+                cases.terrain_drop(60, "mix", spacing=0.9, body_contact=True, sleep=True, graph=True,
+                                   restitution=0.6, pair_schedule="colors")):
+        before = len(made)
+        sim.step(70, check=False)
+        assert len(made) == before, f"{len(made) - before} arrays allocated inside a conditional body"
+    assert entered[0] > 0  # bodies were captured: the check saw something

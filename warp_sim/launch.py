@@ -11,7 +11,12 @@ per thread).  Kernels launched this way must not count through shared atomics: W
 count / scan / write instead (see collide/broad_phase.py); the one shared write left is the
 non-finite flag, which any racing writer still leaves non-zero.
 
-On CUDA it is a single ordinary launch (and so graph-capturable).  During a CPU graph capture
+On CUDA it is a single ordinary launch (and so graph-capturable), of at most ``BLOCKS_PER_SM``
+blocks a multiprocessor: Warp's kernels loop over their index range in grid strides, so a launch
+sized by a capacity (12 pairs a body, of which a rain uses about one) walks its idle tail inside
+resident threads instead of scheduling a block for every 256 of them.  Measured on an H200 with
+1M bodies, before this cap: the colouring's capacity-sized launches took 40 ms of a 120 ms step,
+almost all of it blocks whose threads returned at once.  During a CPU graph capture
 (Warp records the launches for replay, ``wp.ScopedCapture(device="cpu")``) it is one launch too,
 recorded in order on the calling thread.  ``race_check.RaceCheck`` replaces every launch made
 through here with checked ones (chunk orders shuffled and reversed, each thread run alone).
@@ -37,6 +42,7 @@ LIGHT_CHUNK = 1 << 16  # for kernels of a few loads and stores a thread (cell ke
 MIN_CHUNK = 4096  # below this a chunk costs more in thread hand-off than it saves (rain of 1k bodies:
 #                   43 steps/s on one thread, 38 split in two; 10k: 5.3 on one, 8.1 split)
 
+BLOCKS_PER_SM = 8  # 2048 resident threads a multiprocessor at 256 a block: a full machine, no more
 _CPU_COUNT = os.cpu_count() or 1  # asked once: the call costs ~9 us, and launches ask per launch
 _pool: ThreadPoolExecutor | None = None
 _warm: set = set()
@@ -75,6 +81,14 @@ def _executor(threads: int) -> ThreadPoolExecutor:
     return _pool
 
 
+def gpu_blocks(device) -> dict:
+    """``wp.launch`` keywords capping a CUDA launch's blocks (module docstring); none on the CPU."""
+    device = wp.get_device(device)
+    if device.is_cuda and device.sm_count > 0:
+        return {"max_blocks": device.sm_count * BLOCKS_PER_SM}
+    return {}
+
+
 def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK) -> None:
     """``min_chunk``: the fewest indices worth a thread of their own (1 for kernels whose
     threads each carry a large share of the work, such as solvers/domains.py's slabs)."""
@@ -92,14 +106,14 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
     warm_key = (kernel, device.alias)
     if warm_key not in _warm:
         # the first launch compiles and loads the module: do it on this thread, whole
-        wp.launch(kernel, dim=dim, inputs=[0, *inputs], device=device)
+        wp.launch(kernel, dim=dim, inputs=[0, *inputs], device=device, **gpu_blocks(device))
         _warm.add(warm_key)
         return
     chunks = max(chunks, 1)
     bounds = [dim * k // chunks for k in range(chunks + 1)]
     if key is None:
-        jobs = [(wp.launch, (kernel, bounds[k + 1] - bounds[k], [bounds[k], *inputs]), {"device": device})
-                for k in range(chunks)]
+        jobs = [(wp.launch, (kernel, bounds[k + 1] - bounds[k], [bounds[k], *inputs]),
+                 {"device": device, **gpu_blocks(device)}) for k in range(chunks)]
     else:
         commands = _commands(key, kernel, inputs, device, chunks)
         jobs = []
@@ -136,8 +150,8 @@ def _commands(key, kernel, inputs: list, device, chunks: int) -> list:
         site[(kernel, device.alias)] = entry
     if len(entry.commands) < chunks or not entry.inputs:
         entry.inputs = list(inputs)
-        entry.commands = [wp.launch(kernel, dim=1, inputs=[0, *inputs], device=device, record_cmd=True)
-                          for _ in range(max(chunks, len(entry.commands)))]
+        entry.commands = [wp.launch(kernel, dim=1, inputs=[0, *inputs], device=device, record_cmd=True,
+                                    **gpu_blocks(device)) for _ in range(max(chunks, len(entry.commands)))]
         return entry.commands
     for index, (old, new) in enumerate(zip(entry.inputs, inputs)):
         if not _same(old, new):

@@ -51,7 +51,7 @@ from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pai
 from .sleep import AwakeModel, Sleep
 from .integrate import PRE_KICK_FRACTION
 from .kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel, bind
-from .launch import cpu_threads, launch
+from .launch import cpu_threads, gpu_blocks, launch
 from .model import Model
 from .solvers.pair_refresh import refresh_turned
 from .config import NonFiniteStateError, SimConfig  # noqa: F401 (SimConfig is imported from here too)
@@ -279,7 +279,7 @@ class Simulator:
         solver = self.solver
         state = self.states[0]
         self.outrun.zero_()
-        wp.launch(reach_outrun, dim=m.body_count, device=self.device, inputs=[  # atomics: never split
+        wp.launch(reach_outrun, dim=m.body_count, device=self.device, **gpu_blocks(self.device), inputs=[  # atomics: never split
             m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, remaining, self._gravity_magnitude, margin,
             int(after_impacts), solver.solver_ref_pos, state.body_pos, state.body_rot, state.body_vel,
             state.body_angmom, solver.solver_v, solver.solver_w, self.pairs.body_reach, self.outrun])

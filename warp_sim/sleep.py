@@ -47,7 +47,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .launch import launch
+from .launch import gpu_blocks, launch
 
 wp.set_module_options({"enable_backward": False})
 
@@ -225,7 +225,7 @@ class Sleep:
         self.woken.zero_()
         # atomics: one launch, never split into CPU chunks (launch.py: Warp's CPU atomics are plain
         # read-modify-writes, so chunks on two threads would race)
-        wp.launch(mark_touched_sleepers, dim=contacts.pair_max, device=self.device, inputs=[
+        wp.launch(mark_touched_sleepers, dim=contacts.pair_max, device=self.device, **gpu_blocks(self.device), inputs=[
             0, contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass, self.sleep_time,
             self.body_inv_mass_awake, self.body_sleep_timer, self.body_wake, self.woken])
         launch(wake_marked, m.body_count, key=self, inputs=[
@@ -236,7 +236,7 @@ class Sleep:
         """After a step: gather neighbour timers over the contact pairs, then decide per body."""
         m = self.model
         if contacts is not None and contacts.pair_max > 0:
-            wp.launch(gather_neighbour_timers, dim=contacts.pair_max, device=self.device, inputs=[
+            wp.launch(gather_neighbour_timers, dim=contacts.pair_max, device=self.device, **gpu_blocks(self.device), inputs=[
                 0, contacts.pair_count, contacts.pair_body, contacts.pair_point_count, m.body_inv_mass,
                 self.body_sleep_timer, self.body_neighbour_timer])  # atomics: never split (see above)
         launch(update_sleep, m.body_count, key=self, inputs=[

@@ -47,7 +47,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..launch import LIGHT_CHUNK, launch
+from ..launch import LIGHT_CHUNK, gpu_blocks, launch
+from ..prefix_sum import ExclusiveScan
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
@@ -337,6 +338,7 @@ class BroadPhase:
         self.body_static = wp.zeros(n, dtype=wp.int32, device=self.device)
         self.row_count = wp.zeros(n, dtype=wp.int64, device=self.device)
         self.row_start = wp.zeros(n, dtype=wp.int64, device=self.device)
+        self.row_scan = ExclusiveScan(n, self.device, wp.int64)  # capturable, no temporary allocation
         self._radius_key = None
         self._max_radius = 0.0
         self._device_radius_key = None
@@ -414,7 +416,7 @@ class BroadPhase:
         key = (radii.ptr, n)
         if radii_vary or key != self._device_radius_key:
             self.max_radius_device.zero_()
-            wp.launch(radius_max, dim=n, device=self.device, inputs=[radii[:n], self.max_radius_device])
+            wp.launch(radius_max, dim=n, device=self.device, **gpu_blocks(self.device), inputs=[radii[:n], self.max_radius_device])
             self._device_radius_key = key
         wp.launch(grid_scale, dim=1, device=self.device, inputs=[margin, self.max_radius_device, self.inv_cell])
         return self.inv_cell
@@ -423,7 +425,7 @@ class BroadPhase:
         return (2.0 * self.max_radius(radii) + margin) * (1.0 + CELL_SLACK) + 1.0e-12
 
     def _scan_rows(self, n: int):
-        wp.utils.array_scan(self.row_count[:n], self.row_start[:n], inclusive=False)
+        self.row_scan.run(self.row_count, self.row_start, n)
 
     def _find_rows(self, n, positions, radii, margin):
         raise NotImplementedError
@@ -439,9 +441,10 @@ class AllPairsBroadPhase(BroadPhase):
             raise ValueError(f"all_pairs supports at most {TRIANGLE_BODY_MAX} bodies, got {body_count}")
         super().__init__(body_count, capacity, device)
         self.static_before = wp.zeros(max(body_count, 1), dtype=wp.int32, device=self.device)
+        self.static_scan = ExclusiveScan(max(body_count, 1), self.device, wp.int32)
 
     def _find_rows(self, n, positions, radii, margin):
-        wp.utils.array_scan(self.body_static[:n], self.static_before[:n], inclusive=False)
+        self.static_scan.run(self.body_static, self.static_before, n)
         launch(all_pairs_row_count, dim=n, device=self.device,
                inputs=[n, self.body_static, self.static_before, self.row_count])
         self._scan_rows(n)

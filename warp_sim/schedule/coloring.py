@@ -41,7 +41,7 @@ live count and stops the rounds as soon as none is pending, which it may read ch
 
 import warp as wp
 
-from ..launch import LIGHT_CHUNK, launch
+from ..launch import LIGHT_CHUNK, gpu_blocks, launch
 
 wp.set_module_options({"enable_backward": False})
 
@@ -283,7 +283,7 @@ class PairColoring:
                 contacts.pair_count, contacts.pair_point_count, self.pair_color, self.pending])
             for r in range(ROUND_CAP):
                 # atomics: one plain launch (Warp's CPU atomics are not atomic across launch chunks)
-                wp.launch(color_claim, dim=dim, device=dev, inputs=[
+                wp.launch(color_claim, dim=dim, device=dev, **gpu_blocks(dev), inputs=[
                     r, body_inv_mass, contacts.pair_count, contacts.pair_body, self.pair_color, self.pending,
                     self.body_best, self.body_least])
                 for phase in range(2):

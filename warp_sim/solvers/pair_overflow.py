@@ -45,7 +45,7 @@ atomics are not atomic across launch chunks (warp_sim/launch.py).
 import warp as wp
 
 from ..kernel_args import BodyModel, PairContacts
-from ..launch import launch
+from ..launch import gpu_blocks, launch
 from ..schedule.coloring import COLOR_COUNT
 from .impact import OTHER_EVENT, impact_pair_velocity, unchanged_since
 from .pair_solve import MODE_IMPACT, MODE_WARM_START, read_pair_velocity, solve_pair_points
@@ -318,12 +318,12 @@ class OverflowPairs:
         if recount:
             self.solver_overflow_split.zero_()
             self.solver_overflow_owner.fill_(NO_OWNER)
-            wp.launch(overflow_count, dim=dim, device=self.device, inputs=[
+            wp.launch(overflow_count, dim=dim, device=self.device, **gpu_blocks(self.device), inputs=[
                 contacts.color_start, contacts.color_pairs_sorted, body_inv_mass, contacts.pair_body,
                 self.solver_overflow_split, self.solver_overflow_owner])
         if mode == MODE_IMPACT:
             # one split sweep per impact sweep, as the colours get (the stage repeats its sweeps)
-            wp.launch(overflow_impact_pass, dim=dim, device=self.device, inputs=[
+            wp.launch(overflow_impact_pass, dim=dim, device=self.device, **gpu_blocks(self.device), inputs=[
                 impact_sweep, impact_since, contacts.color_start, contacts.color_pairs_sorted, model_args,
                 settings_args, pairs_args, solver_args, self.solver_overflow_split, self.solver_overflow_velocity,
                 self.solver_overflow_shift, self.solver_overflow_hit])
@@ -334,7 +334,7 @@ class OverflowPairs:
                 solver_args.solver_impact_stamp, solver_args.solver_event_partner])
             return
         for _ in range(1 if mode == MODE_WARM_START else OVERFLOW_ITERATIONS):
-            wp.launch(overflow_pair_pass, dim=dim, device=self.device, inputs=[
+            wp.launch(overflow_pair_pass, dim=dim, device=self.device, **gpu_blocks(self.device), inputs=[
                 mode, contacts.color_start, contacts.color_pairs_sorted, model_args, settings_args, pairs_args,
                 solver_args, self.solver_overflow_split, self.solver_overflow_velocity])
             # no atomics: through warp_sim.launch, so race_check sees that no two threads write a body

@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts, bind
-from ..launch import LIGHT_CHUNK, launch
+from ..launch import LIGHT_CHUNK, gpu_blocks, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
 from .domains import domain_sweep
@@ -257,7 +257,7 @@ class SoftStepSolver:
         impacts (impact.pair_contact_times); after the impact begin, before the impact sweeps.
         One launch, never split: Warp's CPU atomics are not atomic across chunks (launch.py)."""
         if a.contacts.pair_max > 0:
-            wp.launch(pair_contact_times, dim=a.contacts.pair_max, device=self.device, inputs=[
+            wp.launch(pair_contact_times, dim=a.contacts.pair_max, device=self.device, **gpu_blocks(self.device), inputs=[
                 0, a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver])
 
     def _impact_sweep(self, m, a, pairs, impact_round: int):
