@@ -52,6 +52,9 @@ PYEOF
 )
 files=$(echo $files)
 timeout 150 python3 bench/gpu.py --compile-only --device "$DEVICE" --out "$OUT" 2>&1 | tee -a "$OUT/environment.txt"
+# the tests get at most half of what is left after the compile (a cold kernel cache costs minutes)
+half=$(( (CALL_BUDGET - $(elapsed)) / 2 ))
+[ "$half" -lt "$TEST_BUDGET" ] && TEST_BUDGET=$half
 workers=""
 python3 -c "import xdist" 2>/dev/null && workers="-n 8"
 echo "[$(elapsed) s] tests on $DEVICE ${workers:-(one process)}: $files"
