@@ -14,9 +14,11 @@ non-finite flag, which any racing writer still leaves non-zero.
 On CUDA it is a single ordinary launch (and so graph-capturable), of at most ``BLOCKS_PER_SM``
 blocks a multiprocessor: Warp's kernels loop over their index range in grid strides, so a launch
 sized by a capacity (12 pairs a body, of which a rain uses about one) walks its idle tail inside
-resident threads instead of scheduling a block for every 256 of them.  Measured on an H200 with
-1M bodies, before this cap: the colouring's capacity-sized launches took 40 ms of a 120 ms step,
-almost all of it blocks whose threads returned at once.  During a CPU graph capture
+resident threads instead of scheduling a block for every 256 of them.  On an H200 with 1M bodies
+the cap more than halved the colouring's time, nearly all of which had been blocks whose threads
+returned at once, but slowed collide_pairs, whose capped threads run several heavy pairs in a
+row; that kernel launches uncapped (``capped = False``; figures in the README's GPU path and
+bench/results/gpu_h200*.json).  During a CPU graph capture
 (Warp records the launches for replay, ``wp.ScopedCapture(device="cpu")``) it is one launch too,
 recorded in order on the calling thread.  ``race_check.RaceCheck`` replaces every launch made
 through here with checked ones (chunk orders shuffled and reversed, each thread run alone).
@@ -89,10 +91,13 @@ def gpu_blocks(device) -> dict:
     return {}
 
 
-def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK) -> None:
+def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK, capped: bool = True) -> None:
     """``min_chunk``: the fewest indices worth a thread of their own (1 for kernels whose
-    threads each carry a large share of the work, such as solvers/domains.py's slabs)."""
+    threads each carry a large share of the work, such as solvers/domains.py's slabs).
+    ``capped = False``: no block cap on CUDA (module docstring), for a heavy kernel whose threads
+    run several of its items in a row when capped (collide_pairs)."""
     device = wp.get_device(device)
+    blocks = gpu_blocks(device) if capped else {}
     if dim <= 0:
         return
     if _checker is not None and (device.is_cpu or _checker.any_device):
@@ -106,16 +111,16 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
     warm_key = (kernel, device.alias)
     if warm_key not in _warm:
         # the first launch compiles and loads the module: do it on this thread, whole
-        wp.launch(kernel, dim=dim, inputs=[0, *inputs], device=device, **gpu_blocks(device))
+        wp.launch(kernel, dim=dim, inputs=[0, *inputs], device=device, **blocks)
         _warm.add(warm_key)
         return
     chunks = max(chunks, 1)
     bounds = [dim * k // chunks for k in range(chunks + 1)]
     if key is None:
         jobs = [(wp.launch, (kernel, bounds[k + 1] - bounds[k], [bounds[k], *inputs]),
-                 {"device": device, **gpu_blocks(device)}) for k in range(chunks)]
+                 {"device": device, **blocks}) for k in range(chunks)]
     else:
-        commands = _commands(key, kernel, inputs, device, chunks)
+        commands = _commands(key, kernel, inputs, device, chunks, blocks)
         jobs = []
         for k in range(chunks):
             cmd = commands[k]
@@ -141,7 +146,7 @@ def _same(old, new) -> bool:
     return type(old) in (int, float, bool) and type(new) is type(old) and old == new
 
 
-def _commands(key, kernel, inputs: list, device, chunks: int) -> list:
+def _commands(key, kernel, inputs: list, device, chunks: int, blocks: dict) -> list:
     """Recorded launch commands for this call site, with their arguments brought up to date."""
     site = _recorded.setdefault(key, {})
     entry = site.get((kernel, device.alias))
@@ -151,7 +156,7 @@ def _commands(key, kernel, inputs: list, device, chunks: int) -> list:
     if len(entry.commands) < chunks or not entry.inputs:
         entry.inputs = list(inputs)
         entry.commands = [wp.launch(kernel, dim=1, inputs=[0, *inputs], device=device, record_cmd=True,
-                                    **gpu_blocks(device)) for _ in range(max(chunks, len(entry.commands)))]
+                                    **blocks) for _ in range(max(chunks, len(entry.commands)))]
         return entry.commands
     for index, (old, new) in enumerate(zip(entry.inputs, inputs)):
         if not _same(old, new):

@@ -101,7 +101,7 @@ class PairContactPipeline:
             self.live_dim = max(1, min(demand, self.capacity))
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
-        launch(collide_pairs, self.live_dim, key=self, inputs=[
+        launch(collide_pairs, self.live_dim, key=self, capped=False, inputs=[
             m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, margin, state.body_pos,
             state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
@@ -159,7 +159,7 @@ class PairContactPipeline:
             m.body_bound_radius,
             self.broad.pair_body, self.broad.pair_count,
             probe.pair_body, probe.pair_point_count, probe.pair_normal, probe.pair_point,
-            probe.pair_depth, probe.pair_feature, probe.pair_refresh_count], self.device)
+            probe.pair_depth, probe.pair_feature, probe.pair_refresh_count], self.device, capped=False)
         count = min(int(self.broad.pair_count.numpy()[0]), self.capacity)
         if count == 0:
             return 0.0
