@@ -1,12 +1,9 @@
 #!/usr/bin/env bash
-# The one prepared command for a lent GPU: the physics tests on CUDA, then bench/gpu.py.
+# One command that checks a GPU machine: the physics tests on CUDA, then bench/gpu.py, inside a
+# fixed time budget (CALL_BUDGET seconds), results under OUT as they come.  Warp must be
+# importable (installed, or on PYTHONPATH):
 #
-# A lent machine has 15 minutes in all (its start-up and the transfers count), one command at a
-# time, at most 10 minutes a command, and no Warp: ../shared/hooks/device/prepare.sh splits the
-# Warp wheel into three parts that three back-to-back calls carry.  This script is the third
-# call's work, after the wheel is installed:
-#
-#   bash .device/p3/install.sh && export PYTHONPATH=/tmp/site:$PWD && bash bench/gpu_session.sh
+#   OUT=/tmp/gpu_session bash bench/gpu_session.sh
 #
 # 0. bench/gpu.py --compile-only: every kernel module compiled for the device (NVRTC) and the CPU
 #    on parallel threads, into the kernel cache the later steps load from (tests launching
@@ -18,8 +15,8 @@
 # 2. bench/gpu.py --device cuda:0 with what is left of CALL_BUDGET (it skips a part that would
 #    not fit, caps every stepping loop, and writes gpu.json / gpu.csv / gpu.png after each part).
 #
-# At most 7 files land in $OUT (a lent machine returns 8).  CALL_BUDGET leaves about a minute of
-# the command's limit for the transfers back: give the call timeout_s = CALL_BUDGET + 60.
+# At most 7 files land in OUT (environment.txt, cuda_tests.txt/.xml, gpu_log.txt, gpu.json/.csv/.png),
+# so that a remote runner that brings back a few files gets all of them.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-${1:-/tmp/gpu_session}}

@@ -64,7 +64,7 @@ def test_byte_model_charges_the_struct_fields_a_kernel_names():
 
 
 def test_the_device_session_dry_run_lists_the_device_tests_and_runs_the_benchmark(tmp_path):
-    """bench/gpu_session.sh, the one command a lent GPU runs, dry-run on the CPU: it finds the
+    """bench/gpu_session.sh, the one command a GPU machine runs, dry-run on the CPU: it finds the
     test files whose tests take ``device`` (their cuda:0 instances are what it runs there), and
     bench/gpu.py writes its results under OUT within the call's budget."""
     import os
