@@ -10,12 +10,13 @@ its live threads own, read and written once:
 Per-body launches: ``live`` is the dimension and ``per_thread`` = ceil(length / dim) (1 for a
 per-body array, a body's slots for the terrain slot arrays).  Per-pair launches (the narrow
 phase, warm-start carry and store, the colouring, and the colour launches of the solver and of
-sleeping): ``live`` is the pairs found (for a colour launch, the pairs of that colour), a pair
-owns ceil(length / capacity) elements of a pair array (4 points) and 2 of a per-body array.
-Threads past the live count read one counter and are not charged.
+sleeping): ``live`` is the pairs found (for a colour launch, the pairs of that colour; for the
+split sweeps of the pairs past the colours, that set; for a colouring round after the last busy
+one, none), a pair owns ceil(length / capacity) elements of a pair array (4 points) and 2 of a
+per-body array.  Threads past the live count read one counter and are not charged.
 Launches made with ``wp.launch`` directly because they use atomics (which launch.py must not
 split across CPU threads) are recorded too when they are per-body or per-pair work: the
-mid-step reach check (reach_outrun) and sleeping's pair passes (DIRECT_KERNELS).  What it
+mid-step reach check (reach_outrun), sleeping's pair passes and the split sweeps (DIRECT_KERNELS).  What it
 leaves out: the other direct launches (one-thread bookkeeping, the atomic colouring claims, the
 radix sorts and scans), neighbour reads in the broad phase beyond
 one element a thread, and caches: it is a model of the traffic a GPU has to move at least once,
@@ -39,14 +40,19 @@ import warp as wp  # noqa: E402
 
 from warp_sim import FourierTerrain, cases  # noqa: E402
 from warp_sim import launch as launch_module  # noqa: E402
+from warp_sim.schedule.coloring import COLOR_COUNT  # noqa: E402
 
 
 PAIR_KERNELS = {"collide_pairs", "carry_pair_impulses", "store_pairs", "color_init", "color_pick", "color_keys",
                 "color_bounds", "pair_pass", "pushout_pair", "gather_neighbour_timers"}
 
 
+# the split sweeps of the pairs past the colours (solvers/pair_overflow.py): live = that set's size
+OVERFLOW_KERNELS = {"overflow_count", "overflow_impact_pass", "overflow_pair_pass", "overflow_apply"}
+
 # per-body or per-pair kernels launched with wp.launch directly (atomics: never split)
-DIRECT_KERNELS = {"reach_outrun", "mark_touched_sleepers", "gather_neighbour_timers"}
+DIRECT_KERNELS = {"reach_outrun", "mark_touched_sleepers", "gather_neighbour_timers", "overflow_count",
+                  "overflow_impact_pass", "overflow_pair_pass"}
 
 
 def _function_sources() -> dict[str, str]:
@@ -145,7 +151,7 @@ class ByteCounter:
         total = 0
         if name == "chain_pass":
             total = self.chain_bytes(kernel, args, inputs)
-        elif name in PAIR_KERNELS:
+        elif name in PAIR_KERNELS or name in OVERFLOW_KERNELS:
             live = dim
             for counter in ("pair_count", "broad_pair_count"):
                 if counter in args:
@@ -153,6 +159,11 @@ class ByteCounter:
             if "color" in args and "color_start" in args:
                 starts = args["color_start"].numpy()
                 live = int(starts[args["color"] + 1] - starts[args["color"]])
+            if name in OVERFLOW_KERNELS:
+                starts = args["color_start"].numpy()
+                live = int(starts[COLOR_COUNT + 1] - starts[COLOR_COUNT])
+            if "pending" in args and "round" in args and int(args["pending"].numpy()[args["round"]]) == 0:
+                live = 0  # a colouring round after the last busy one: each thread reads one flag
             live = min(live, dim)
             for value in launch_arrays(kernel, inputs):
                 if value.size > 0:

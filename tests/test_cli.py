@@ -159,16 +159,18 @@ def test_usage_error_returns_2(tiny, capsys):
 
 
 def test_non_finite_run_names_body_and_step(tmp_path, capsys):
-    """A body launched at 1e38 m/s overflows float32 in the first step: exit 2, naming the body,
-    the step and the [[body]] table it came from."""
-    second = ('[[body]]\nshape = "sphere"\nradius = 0.1\nposition = [3.0, 2.0, 0.0]\n'
-              "velocity = [1e38, 0.0, 0.0]\n")
-    path = write(tmp_path, TINY.replace("[[layout]]", second + "[[layout]]"))
+    """A gravity of 3e38 m/s^2 (a float32, but its products overflow) makes every body non-finite
+    in the first step: exit 2, naming the first body, the step and the [[body]] table it came
+    from.  (Starting speeds that overflow are refused at build: test_validation.)"""
+    second = '[[body]]\nshape = "sphere"\nradius = 0.1\nposition = [3.0, 2.0, 0.0]\n'
+    text = TINY.replace("[[layout]]", second + "[[layout]]").replace("substeps = 2", "substeps = 2\n"
+                                                                     "gravity = [3.0e38, 0.0, 0.0]")
+    path = write(tmp_path, text)
     assert main(["run", str(path), "--steps", "5", "--quiet", "--out", str(tmp_path / "r.npz")]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "Traceback" not in err
-    assert err.startswith(f"error: {path}: body 1 (sphere) became non-finite at step 1")
-    assert "[[body]] #2" in err
+    assert err.startswith(f"error: {path}: body 0 (sphere) became non-finite at step 1")
+    assert "[[body]] #1" in err and "bodies 1, 2, 3" in err
     # the frames before the failure are kept, and the file says where and why the run stopped
     run = load_run(tmp_path / "r.npz")
     assert run["summary"]["stop_reason"] == "non_finite" and run["summary"]["stop_step"] == 1

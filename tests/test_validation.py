@@ -8,7 +8,7 @@ import pytest
 
 from warp_sim import FourierTerrain, ModelBuilder, PlaneTerrain, SimConfig, Simulator
 from warp_sim.builder import Material
-from warp_sim.scene import SceneError, parse_scene
+from warp_sim.scene import SceneError, load_scene, parse_scene
 
 API_ERRORS = {
     "negative radius": (lambda: ModelBuilder().add_sphere(-1.0), "radius must be a positive finite number, got -1.0"),
@@ -309,9 +309,13 @@ def test_a_non_finite_step_names_every_body_it_reached():
     b = ModelBuilder()
     b.set_terrain(NoTerrain())
     b.add_sphere(0.1, position=(0.0, 0.0, 0.0), velocity=(1.0, 0.0, 0.0))
-    b.add_box((0.1, 0.1, 0.1), position=(0.0, 5.0, 0.0), velocity=(1e38, 0.0, 0.0))
-    b.add_sphere(0.1, position=(0.0, 10.0, 0.0), velocity=(3e38, 0.0, 0.0))
+    b.add_box((0.1, 0.1, 0.1), position=(0.0, 5.0, 0.0))
+    b.add_sphere(0.1, position=(0.0, 10.0, 0.0))
     sim = Simulator(b.finalize("cpu"), SimConfig(gravity=(0.0, 0.0, 0.0), sleep=False))
+    # speeds no builder accepts (past light), written into the state as an API user may
+    vel = sim.state.body_vel.numpy()
+    vel[1], vel[2] = (1e38, 0.0, 0.0), (3e38, 0.0, 0.0)
+    sim.state.body_vel.assign(vel)
     with pytest.raises(NonFiniteStateError) as e:
         sim.step(3)
     assert (e.value.body, *e.value.others) == (1, 2)
@@ -329,3 +333,64 @@ def test_config_fields_assigned_later_meet_the_same_rules():
     with pytest.raises(ValueError, match="SimConfig gravity must be 3 finite numbers"):
         sim.config.gravity = (0.0, float("nan"), 0.0)
     assert sim.config.dt == pytest.approx(1.0 / 60.0)
+
+
+SPEED_OF_LIGHT = 299_792_458.0
+
+
+@pytest.mark.parametrize("speed, accepted", [(0.5 * SPEED_OF_LIGHT, True), (0.999 * SPEED_OF_LIGHT, True),
+                                             (1.001 * SPEED_OF_LIGHT, False), (1e20, False), (1e38, False)])
+@pytest.mark.parametrize("direction", [(1.0, 0.0, 0.0), (0.0, -0.6, 0.8)])
+def test_starting_speeds_beyond_light_are_refused_everywhere_a_body_is_made(tmp_path, speed, accepted, direction):
+    """A ball given 1e38 m/s used to hand NaN to a box 5 m the other way in its first step; speeds
+    up to light are kept (and stay finite: the next test), faster ones refused by name."""
+    velocity = tuple(speed * d for d in direction)
+    makers = {
+        "add_sphere": lambda b: b.add_sphere(0.25, 1.0, velocity=velocity),
+        "add_box": lambda b: b.add_box((0.25, 0.25, 0.25), 1.0, velocity=velocity),
+        "add_bodies": lambda b: b.add_bodies("sphere", 0.25, position=[[0, 0, 0], [2, 0, 0]],
+                                             velocity=[[0, 0, 0], list(velocity)]),
+    }
+    for name, make in makers.items():
+        if accepted:
+            make(ModelBuilder())
+        else:
+            with pytest.raises(ValueError, match=r"velocity(\[1\])? must be 3 finite numbers of length at most "
+                                                 r"2\.998e\+08 \(the speed of light"):
+                make(ModelBuilder())
+    scene = tmp_path / "fast.toml"
+    scene.write_text(f'[[body]]\nshape = "sphere"\nradius = 0.5\nvelocity = [{velocity[0]!r}, {velocity[1]!r}, '
+                     f'{velocity[2]!r}]\n')
+    if accepted:
+        load_scene(scene)
+    else:
+        with pytest.raises(SceneError, match=r"\[\[body\]\] #1 velocity must be .* at most 2\.998e\+08"):
+            load_scene(scene)
+
+
+@pytest.mark.parametrize("spin, accepted", [(0.9e12, True), (1.1e12, False), (1e30, False)])
+def test_starting_spins_past_float32_safety_are_refused(spin, accepted):
+    make = lambda: ModelBuilder().add_box((0.1, 0.2, 0.3), 1.0, angular_velocity=(0.0, spin, 0.0))  # noqa: E731
+    if accepted:
+        make()
+    else:
+        with pytest.raises(ValueError, match=r"angular_velocity must be .* at most 1e\+12"):
+            make()
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_ball_at_nearly_light_speed_leaves_bodies_out_of_its_path_alone(device, sign):
+    """The fastest start allowed, 0.999 c along x, among balls on that line and a box on the
+    other side: everything stays finite, and what lies behind the ball is not touched."""
+    b = ModelBuilder()
+    b.set_terrain(PlaneTerrain())
+    b.add_sphere(0.25, 1.0, position=(0.0, 0.25, 0.0), velocity=(sign * 0.999 * SPEED_OF_LIGHT, 0.0, 0.0))
+    ahead = [b.add_sphere(0.25, 1.0, position=(sign * 5.0 * k, 0.25, 0.0)) for k in range(1, 4)]
+    behind = b.add_box((0.25, 0.25, 0.25), 1.0, position=(-sign * 5.0, 0.25, 0.0))
+    sim = Simulator(b.finalize(device), SimConfig(body_contact=True, device=device))
+    sim.step(1)  # raises NonFiniteStateError on any NaN or inf
+    pos = sim.state.body_pos.numpy()
+    assert np.isfinite(pos).all() and np.isfinite(sim.state.body_vel.numpy()).all()
+    # the box behind only settles on the plane: a step of gravity, g dt^2 ~ 3 mm at most
+    assert abs(pos[behind][0] - (-sign * 5.0)) < 1e-3 and abs(pos[behind][1] - 0.25) < 5e-3
+    assert len(ahead) == 3

@@ -91,7 +91,8 @@ def gpu_blocks(device) -> dict:
     return {}
 
 
-def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK, capped: bool = True) -> None:
+def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MIN_CHUNK,
+           capped: bool = True) -> None:
     """``min_chunk``: the fewest indices worth a thread of their own (1 for kernels whose
     threads each carry a large share of the work, such as solvers/domains.py's slabs).
     ``capped = False``: no block cap on CUDA (module docstring), for a heavy kernel whose threads

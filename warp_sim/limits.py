@@ -2,8 +2,9 @@
 
 Memory (``estimate_bytes``) is a sum of per-item costs read off the arrays the builder, the Model,
 the two States, the two contact buffers (the live one, and the penetration probe that a run
-recording frames makes on its first frame) and the pair pipeline allocate, plus the recorded frames a run keeps in memory.  It is compared with
-``available_memory()`` (MemAvailable of /proc/meminfo, else os.sysconf) and a run that would
+recording frames makes on its first frame) and the pair pipeline allocate, plus the recorded
+frames a run keeps in memory.  It is compared with ``available_memory()`` (MemAvailable of
+/proc/meminfo, else os.sysconf), or on CUDA with the device's free memory, and a run that would
 not fit stops with one line naming the key and the estimate.
 
 Terrain resolution (``check_terrain_resolution``).  The Warp kernel evaluates the series from

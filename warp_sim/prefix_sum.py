@@ -1,10 +1,10 @@
-"""Exclusive prefix sums of integer counts (int32 or int64), from preallocated scratch: capturable anywhere.
+"""Exclusive prefix sums of integer counts (int32 or int64) from preallocated scratch: capturable.
 
 Why not ``wp.utils.array_scan``: on CUDA it allocates CUB's temporary storage on every call.
 Inside a captured graph that becomes an allocation node, and a conditional body
 (``wp.capture_if``: the mid-step pair pass, the pass after a wake) may hold none; the capture
-then fails with "Conditional body graph contains an unsupported operation (memory allocation)",
-first seen on an H200, where every scene with body contact failed this way at its first captured step.
+then fails with "Conditional body graph contains an unsupported operation (memory allocation)".
+On an H200 every scene with body contact failed this way at its first captured step.
 
 The scan here is two sweeps over chunks of ``SCAN_CHUNK`` values per thread:
 
@@ -49,8 +49,8 @@ def scan_last_level(tid_offset: int, sums: wp.array(dtype=Any), count: int, offs
 
 
 @wp.kernel
-def chunk_running_sums(tid_offset: int, values: wp.array(dtype=Any), count: int, chunk_offsets: wp.array(dtype=Any),
-                       out: wp.array(dtype=Any)):
+def chunk_running_sums(tid_offset: int, values: wp.array(dtype=Any), count: int,
+                       chunk_offsets: wp.array(dtype=Any), out: wp.array(dtype=Any)):
     t = wp.tid() + tid_offset
     first = t * SCAN_CHUNK
     last = wp.min(first + SCAN_CHUNK, count)

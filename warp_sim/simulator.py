@@ -279,7 +279,8 @@ class Simulator:
         solver = self.solver
         state = self.states[0]
         self.outrun.zero_()
-        wp.launch(reach_outrun, dim=m.body_count, device=self.device, **gpu_blocks(self.device), inputs=[  # atomics: never split
+        # atomics: one plain launch, never split
+        wp.launch(reach_outrun, dim=m.body_count, device=self.device, **gpu_blocks(self.device), inputs=[
             m.body_bound_radius, m.body_inv_mass, m.body_inv_inertia, remaining, self._gravity_magnitude, margin,
             int(after_impacts), solver.solver_ref_pos, state.body_pos, state.body_rot, state.body_vel,
             state.body_angmom, solver.solver_v, solver.solver_w, self.pairs.body_reach, self.outrun])

@@ -23,6 +23,11 @@ import numpy as np
 from .types import FRICTION_MODELS, INTEGRATORS, ROTATIONS, SHAPES
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
+# Starting speeds: nothing faster than light is a rigid body, and past that a body's swept reach
+# (speed x dt) and squared speeds leave float32 arithmetic behind: a ball given 1e38 m/s made its
+# candidate pairs' contact solve return NaN to a box 5 m the other way in its first step.
+SPEED_LIMIT = 299_792_458.0
+SPIN_LIMIT = 1.0e12  # rad/s: its square, times an inertia, stays far inside float32's 3.4e38
 
 SOLVERS = ("soft_step", "pushout")
 CONTACT_UPDATES = ("step", "substep")
@@ -148,19 +153,24 @@ class Integer:
 
 @dataclass(frozen=True)
 class Vector:
-    """``n`` finite numbers -> tuple of floats; ``positive``: every entry > 0; ``nonzero``: not all 0."""
+    """``n`` finite numbers -> tuple of floats; ``positive``: every entry > 0; ``nonzero``: not all 0;
+    ``longest``: the vector's length at most this (``longest_why`` says why, in the message)."""
 
     n: int
     default: tuple | None = None
     positive: bool = False
     nonzero: bool = False
     required: bool = False
+    longest: float | None = None
+    longest_why: str = ""
 
     def describe(self) -> str:
         if self.positive:
             return f"{self.n} positive finite numbers"
         if self.nonzero:
             return f"a non-zero vector of {self.n} finite numbers"
+        if self.longest is not None:
+            return f"{self.n} finite numbers of length at most {self.longest:.4g} ({self.longest_why})"
         return f"{self.n} finite numbers"
 
     def ok(self, rows):
@@ -171,6 +181,9 @@ class Vector:
             good &= np.all(rows > 0, axis=-1)
         if self.nonzero:
             good &= np.any(rows != 0, axis=-1)
+        if self.longest is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                good &= np.linalg.norm(np.where(np.isfinite(rows), rows, 0.0), axis=-1) <= self.longest
         return good
 
     def convert(self, value):
@@ -457,8 +470,9 @@ BODY_SCHEMA = {
     "mass": Number(default=1.0, gt=0),
     "position": Vector(3, default=(0.0, 0.0, 0.0)),
     "orientation": Vector(4, default=(0.0, 0.0, 0.0, 1.0), nonzero=True),
-    "velocity": Vector(3, default=(0.0, 0.0, 0.0)),
-    "angular_velocity": Vector(3, default=(0.0, 0.0, 0.0)),
+    "velocity": Vector(3, default=(0.0, 0.0, 0.0), longest=SPEED_LIMIT, longest_why="the speed of light, m/s"),
+    "angular_velocity": Vector(3, default=(0.0, 0.0, 0.0), longest=SPIN_LIMIT,
+                               longest_why="float32 squares of faster spins near overflow, rad/s"),
     "restitution": Number(ge=0, le=1),
     "friction": Number(ge=0),
     "static": Boolean(default=False),

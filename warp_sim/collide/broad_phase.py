@@ -416,7 +416,8 @@ class BroadPhase:
         key = (radii.ptr, n)
         if radii_vary or key != self._device_radius_key:
             self.max_radius_device.zero_()
-            wp.launch(radius_max, dim=n, device=self.device, **gpu_blocks(self.device), inputs=[radii[:n], self.max_radius_device])
+            wp.launch(radius_max, dim=n, device=self.device, **gpu_blocks(self.device),
+                      inputs=[radii[:n], self.max_radius_device])
             self._device_radius_key = key
         wp.launch(grid_scale, dim=1, device=self.device, inputs=[margin, self.max_radius_device, self.inv_cell])
         return self.inv_cell
