@@ -84,3 +84,20 @@ def test_the_device_session_dry_run_lists_the_device_tests_and_runs_the_benchmar
     assert json.loads((tmp_path / "gpu.json").read_text())["parts"]["capture"]["status"] == "ok"
     files = [p.name for p in tmp_path.iterdir()]
     assert len(files) <= 8  # what a device call brings back from $OUT
+
+
+def test_byte_model_charges_a_captured_step_what_a_direct_one_moves():
+    """A captured step runs all 96 colouring rounds, the idle ones returning at once; the model
+    must charge them nothing (the H200 runs' figures had charged their whole pair arrays, about
+    45 kB a body-step).  The same rain stepped directly stops at the last busy round: with the
+    two states equal bit for bit, the colouring must cost the same bytes either way."""
+    from bench import byte_model
+
+    charged = {}
+    for graph in (False, True):
+        sim = cases.terrain_drop(60, "mix", spacing=0.9, body_contact=True, sleep=False, pair_schedule="colors",
+                                 graph=graph)
+        sim.step(40)
+        charged[graph] = byte_model.per_body_step(sim)
+    assert charged[False]["color_pick"] > 0.0
+    assert charged[True]["color_pick"] == charged[False]["color_pick"]
