@@ -162,8 +162,9 @@ class ByteCounter:
             if name in OVERFLOW_KERNELS:
                 starts = args["color_start"].numpy()
                 live = int(starts[COLOR_COUNT + 1] - starts[COLOR_COUNT])
-            if "pending" in args and "round" in args and int(args["pending"].numpy()[args["round"]]) == 0:
-                live = 0  # a colouring round after the last busy one: each thread reads one flag
+            if "pending" in args and "round_index" in args:
+                if int(args["pending"].numpy()[int(args["round_index"].numpy()[0])]) == 0:
+                    live = 0  # a colouring round after the last busy one: each thread reads one flag
             live = min(live, dim)
             for value in launch_arrays(kernel, inputs):
                 if value.size > 0:

@@ -34,9 +34,12 @@ A body gains at most two colours a round, so the rounds grow with the pairs a bo
 colouring from per-body adjacency lists (speculative colours, conflicts settled per body)
 would colour several at once and is the next step if the rounds cost too much on a GPU.
 
-Each launch is capacity-sized when the pipeline is captured (threads past the live pair count
-and rounds after the last busy one return at once); direct CPU stepping sizes them from the
-live count and stops the rounds as soon as none is pending, which it may read cheaply there.
+The rounds run in a loop that stops once no pair is pending: ``wp.capture_while`` on a device
+flag, which a captured step records as a conditional while node and direct stepping runs as a
+loop reading the flag (captured steps used to run all ROUND_CAP rounds, the idle ones returning
+at once: on an H200 most of the colouring's time at 1M bodies).  Each launch is capacity-sized
+when the pipeline is captured (threads past the live pair count return at once); direct CPU
+stepping sizes them from the live count.
 """
 
 import warp as wp
@@ -97,7 +100,7 @@ def color_init(
 
 @wp.kernel
 def color_claim(
-    round: int,
+    round_index: wp.array(dtype=wp.int32),
     body_inv_mass: wp.array(dtype=float),
     pair_count: wp.array(dtype=wp.int32),
     pair_body: wp.array(dtype=wp.vec2i),
@@ -108,6 +111,7 @@ def color_claim(
     body_least: wp.array(dtype=wp.int64),
 ):
     p = wp.tid()
+    round = round_index[0]
     if pending[round] == 0 or p >= pair_count[0] or pair_color[p] != UNCOLORED:
         return
     ij = pair_body[p]
@@ -122,8 +126,8 @@ def color_claim(
 @wp.kernel
 def color_pick(
     tid_offset: int,
-    # Settings
-    round: int,
+    # Settings (the round on the device: the rounds run in a device-side loop)
+    round_index: wp.array(dtype=wp.int32),
     last_round: int,
     phase: int,
     # Model
@@ -142,6 +146,7 @@ def color_pick(
     overflow: wp.array(dtype=wp.int32),
 ):
     p = wp.tid() + tid_offset
+    round = round_index[0]
     if pending[round] == 0 or p >= pair_count[0] or pair_color[p] != UNCOLORED:
         return
     ij = pair_body[p]
@@ -181,6 +186,18 @@ def color_pick(
         body_color_mask[i] = body_color_mask[i] | bit
     if dyn_j:
         body_color_mask[j] = body_color_mask[j] | bit
+
+
+@wp.kernel
+def color_next_round(round_index: wp.array(dtype=wp.int32), pending: wp.array(dtype=wp.int32),
+                     busy: wp.array(dtype=wp.int32)):
+    """One thread: the loop's next round, and whether it has pairs left (the loop's condition)."""
+    following = round_index[0] + 1
+    round_index[0] = following
+    busy[0] = 0
+    if following < ROUND_CAP:
+        if pending[following] != 0:
+            busy[0] = 1
 
 
 @wp.kernel
@@ -263,10 +280,11 @@ class PairColoring:
         self.body_color_mask = wp.zeros(n, dtype=wp.int64, device=device)
         self.pair_color = wp.zeros(self.capacity, dtype=wp.int32, device=device)
         self.pending = wp.zeros(ROUND_CAP + 1, dtype=wp.int32, device=device)
+        self.round_index = wp.zeros(1, dtype=wp.int32, device=device)  # the round the loop is in
+        self.busy = wp.zeros(1, dtype=wp.int32, device=device)  # the loop's condition
         self.overflow = wp.zeros(1, dtype=wp.int32, device=device)
         self.sort_key = wp.zeros(2 * self.capacity, dtype=wp.int32, device=device)
         self.sort_pair = wp.zeros(2 * self.capacity, dtype=wp.int32, device=device)
-        self.rounds_used = 0  # rounds of the last direct (non-captured) pass
         self._pick_site = (_Site(), _Site())  # recorded launches per phase (launch.py)
 
     def run(self, body_inv_mass, contacts, live_count: int | None = None):
@@ -281,19 +299,24 @@ class PairColoring:
         if dim > 0:
             launch(color_init, dim, key=self, min_chunk=LIGHT_CHUNK, device=dev, inputs=[
                 contacts.pair_count, contacts.pair_point_count, self.pair_color, self.pending])
-            for r in range(ROUND_CAP):
+            self.round_index.zero_()
+            self.busy.fill_(1)
+
+            def one_round():
                 # atomics: one plain launch (Warp's CPU atomics are not atomic across launch chunks)
                 wp.launch(color_claim, dim=dim, device=dev, **gpu_blocks(dev), inputs=[
-                    r, body_inv_mass, contacts.pair_count, contacts.pair_body, self.pair_color, self.pending,
-                    self.body_best, self.body_least])
+                    self.round_index, body_inv_mass, contacts.pair_count, contacts.pair_body, self.pair_color,
+                    self.pending, self.body_best, self.body_least])
                 for phase in range(2):
                     launch(color_pick, dim, key=self._pick_site[phase], device=dev, inputs=[
-                        r, ROUND_CAP - 1, phase, body_inv_mass, contacts.pair_count, contacts.pair_body,
-                        self.body_best, self.body_least, self.body_color_mask, self.pair_color, self.pending,
-                        self.overflow])
-                if live_count is not None and int(self.pending.numpy()[r + 1]) == 0:
-                    self.rounds_used = r + 1
-                    break
+                        self.round_index, ROUND_CAP - 1, phase, body_inv_mass, contacts.pair_count,
+                        contacts.pair_body, self.body_best, self.body_least, self.body_color_mask, self.pair_color,
+                        self.pending, self.overflow])
+                wp.launch(color_next_round, dim=1, device=dev, inputs=[self.round_index, self.pending, self.busy])
+
+            # the rounds run while some pair is pending: a device-side loop in a captured step
+            # (a conditional while node), a loop reading the flag on the host when stepped directly
+            wp.capture_while(self.busy, one_round)
             launch(color_keys, dim, key=self, min_chunk=LIGHT_CHUNK, device=dev, inputs=[
                 contacts.pair_count, contacts.pair_body, self.pair_color, self.sort_key, self.sort_pair])
             wp.utils.radix_sort_pairs(self.sort_key, self.sort_pair, dim, 0, SORT_BITS)
