@@ -98,7 +98,7 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
     ``capped = False``: no block cap on CUDA (module docstring), for a heavy kernel whose threads
     run several of its items in a row when capped (collide_pairs)."""
     device = wp.get_device(device)
-    blocks = gpu_blocks(device) if capped else {}
+    blocks = gpu_blocks(device) if capped and device.is_cuda else {}
     if dim <= 0:
         return
     if _checker is not None and (device.is_cpu or _checker.any_device):
