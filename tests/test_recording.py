@@ -169,6 +169,8 @@ OUT_ERRORS = {
     "suffix": ("x.txt", "--out must be an .npz file, got"),
     "directory": (".", "is a directory"),
     "missing directory": ("no/such/dir/run.npz", "directory 'no/such/dir' does not exist"),
+    # numpy appended .npz and left '/dev/null.npz' behind
+    "device": ("/dev/null", "--out '/dev/null' is not a regular file (a device or a pipe)"),
 }
 
 

@@ -71,12 +71,17 @@ def check_output_path(path) -> Path:
     """The run file ``path`` as given, checked before anything is simulated.
 
     No suffix: ``.npz`` is appended (numpy's own habit, kept for old command lines); any other
-    suffix than ``.npz`` is an error, and so are a directory, a missing parent directory and a
-    place that cannot be written (checked by creating and removing a probe file).
+    suffix than ``.npz`` is an error, and so are a directory, a device or pipe (``/dev/null``), a
+    missing parent directory and a place that cannot be written (checked by creating and removing
+    a probe file).
     """
     out = Path(path)
     if out.is_dir():
         raise ValueError(f"--out '{path}' is a directory; give a file name such as '{out / 'run.npz'}'")
+    if out.exists() and not out.is_file():
+        # /dev/null or a pipe: numpy would append .npz and leave a stray '/dev/null.npz' behind
+        raise ValueError(f"--out '{path}' is not a regular file (a device or a pipe); give an .npz file name, "
+                         f"such as 'run.npz'")
     if out.suffix == "":
         out = out.with_name(out.name + ".npz")
     elif out.suffix != ".npz":
