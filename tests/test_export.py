@@ -70,6 +70,8 @@ def test_not_a_run_is_one_line_error(tmp_path):
         load_recording(bad)
     with pytest.raises(RecordingError, match="no such file"):
         load_recording(tmp_path / "absent.npz")
+    with pytest.raises(RecordingError, match="it is a directory"):  # was "no such file"
+        load_recording(tmp_path)
 
 
 def test_playback_clock():

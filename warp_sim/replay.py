@@ -49,6 +49,9 @@ def load_recording(path) -> dict:
     try:
         record = dict(load_run(path))
     except FileNotFoundError:  # neither the file nor an unfinished run's chunk folder
+        if path.is_dir():
+            raise RecordingError(f"cannot read run file '{path}': it is a directory; give the .npz that "
+                                 f"'python -m warp_sim run --out' wrote") from None
         raise RecordingError(f"cannot read run file '{path}': no such file") from None
     except (OSError, ValueError, KeyError) as e:
         raise RecordingError(f"{path}: not a recorded run ({e})") from None
