@@ -101,3 +101,19 @@ def test_byte_model_charges_a_captured_step_what_a_direct_one_moves():
         charged[graph] = byte_model.per_body_step(sim)
     assert charged[False]["color_pick"] > 0.0
     assert charged[True]["color_pick"] == charged[False]["color_pick"]
+
+
+def test_cuda_cache_packs_each_modules_cubin_and_meta_in_its_cache_folder(tmp_path):
+    """bench/cuda_cache.py (sm_90 cubins built here, unpacked on a GPU machine so that it skips
+    NVRTC): one small module, compiled for real; the archive holds <module dir>/<cubin> and the
+    meta file Warp reads beside it, as Warp's kernel cache lays them out."""
+    import tarfile
+
+    from bench import cuda_cache
+
+    out = tmp_path / "cache.tar.xz"
+    assert cuda_cache.main(["--out", str(out), "--workers", "1"], modules=["warp_sim.prefix_sum"]) == 0
+    names = tarfile.open(out).getnames()
+    folders = {n.split("/")[0] for n in names}
+    assert len(folders) == 1 and next(iter(folders)).startswith("wp_warp_sim.prefix_sum_")
+    assert any(n.endswith(".sm90.cubin") for n in names) and any(n.endswith(".meta") for n in names)
