@@ -11,7 +11,8 @@
 #    (bench/cuda_cache.py, built on any machine from the same sources) is unpacked into the
 #    cache first, so NVRTC is skipped (141 s on the H200 machine).
 # 1. Every test that takes ``device`` (tests/conftest.py), run with --cuda and only its cuda:0
-#    instances (the CPU ones ran in CI), on 8 workers where pytest-xdist is installed; the run
+#    instances (the CPU ones ran in CI), the CUDA contract's files first (graph capture, pair
+#    overflow, determinism, ...), on 8 workers where pytest-xdist is installed; the run
 #    gets TEST_BUDGET seconds and is then interrupted (SIGINT), so pytest still writes its
 #    summary and junit XML into $OUT.
 # 2. bench/gpu.py --device cuda:0 with what is left of CALL_BUDGET (it skips a part that would
@@ -42,7 +43,14 @@ EOF
 # the test files with device-parametrised tests (their cuda:0 instances are what runs here)
 files=$(python3 - <<'PYEOF'
 import ast, pathlib
-for path in sorted(pathlib.Path("tests").glob("test_*.py")):
+# the CUDA contract first (capture, overflow, determinism, mid-step passes, scans): a run cut
+# off by its budget has then checked what only a GPU can show
+FIRST = ["test_graph_capture.py", "test_pair_overflow.py", "test_determinism.py", "test_late_contacts.py",
+         "test_prefix_sum.py"]
+paths = sorted(pathlib.Path("tests").glob("test_*.py"), key=lambda p: (p.name not in FIRST,
+                                                                         FIRST.index(p.name) if p.name in FIRST else 0,
+                                                                         p.name))
+for path in paths:
     tree = ast.parse(path.read_text())
     if any(isinstance(node, ast.FunctionDef) and node.name.startswith("test")
            and any(a.arg == "device" for a in node.args.args) for node in ast.walk(tree)):
