@@ -24,7 +24,7 @@ from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impa
 from .pair_overflow import OverflowPairs
 from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES, chain_pass, pair_pass
 from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
-from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, soft_coefficients, soft_load, solve_and_integrate,
+from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, push_cap, soft_coefficients, soft_load, solve_and_integrate,
                         sweep_tolerance)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
@@ -159,7 +159,8 @@ class SoftStepSolver:
             v.gravity, v.h, v.soft = self.gravity, dt, self._soft(dt)
             v.soft_load = soft_load(dt, self.gravity, s.contact_hertz, s.damping_ratio)
             v.integrator, v.rotation = INTEGRATORS[s.integrator], ROTATIONS[s.rotation]
-            v.max_push_velocity, v.restitution_threshold = s.max_push_velocity, s.restitution_threshold
+            v.max_push_velocity = push_cap(s.max_push_velocity, self.gravity, dt, v.soft)
+            v.restitution_threshold = s.restitution_threshold
             v.convergence_tolerance = sweep_tolerance(s.convergence_tolerance, s.convergence_gravity_share,
                                                       self.gravity, dt)
             v.iterations, v.relax_iterations = s.iterations, s.relax_iterations
