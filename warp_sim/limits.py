@@ -256,6 +256,31 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
                 f"({shortest:.3g} m); their {WIDE_SPHERE_SLOTS} contact searches can miss further bumps", stacklevel=3)
 
 
+def warn_heavy_gravity(model, config, substeps: int):
+    """Says when gravity presses resting bodies deeper than half the smallest one's size
+    (solvers/soft_step.resting_sag), with the substeps that would hold them: silent before, a
+    ball under 1e6 m/s^2 sat 0.5 m deep in the ground."""
+    from .solvers.soft_step import resting_sag
+    from .types import SHAPE_SPHERE
+
+    h = model.host
+    dynamic = h["body_inv_mass"] > 0
+    if not dynamic.any():
+        return
+    half = np.where(h["body_shape"] == SHAPE_SPHERE, h["body_size"][:, 0], h["body_size"].min(axis=1))
+    smallest = float(half[dynamic].min())
+    step = config.dt / substeps
+    sag = resting_sag(config.gravity, step, config.contact_hertz, config.damping_ratio)
+    if sag <= 0.5 * smallest:
+        return
+    # the sag goes with h^2 (a2 is fixed while the contact frequency follows the substep rate)
+    need = math.ceil(substeps * math.sqrt(sag / (0.5 * smallest)))
+    warnings.warn(f"gravity of {float(np.linalg.norm(config.gravity)):.3g} m/s^2 at substeps of {step:.3g} s "
+                  f"presses resting bodies about {sag:.3g} m into what holds them, more than half the "
+                  f"smallest body's size ({smallest:.3g} m); use [sim] substeps >= {need}", RuntimeWarning,
+                  stacklevel=3)
+
+
 STEP_COUNT_MAX = 2**31 - 1  # the step counter is an int32 on the device
 
 

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 import time
 import warnings
 from dataclasses import dataclass
@@ -105,7 +104,7 @@ class Simulator:
 
     def __init__(self, model: Model, config: SimConfig):
         config.validate()  # fields may have been set after construction
-        from .limits import check_simulator_memory
+        from .limits import check_simulator_memory, warn_heavy_gravity
 
         check_simulator_memory(model, config)  # before allocating contact buffers the machine lacks
         self.model = model
@@ -120,7 +119,7 @@ class Simulator:
                              "set graph = false or another broad phase, got graph = true")
         self.substep_plan = plan_substeps(model, config)
         self.substeps = self.substep_plan.substeps
-        self._warn_heavy_gravity()
+        warn_heavy_gravity(model, config, self.substeps)
         self.solver = make_solver(self._solver_settings(), config.gravity, self.device, model.body_count)
         self.states = [model.state(), model.state()]
         dynamic = int(np.count_nonzero(model.host["body_inv_mass"] > 0))
@@ -169,29 +168,6 @@ class Simulator:
     @property
     def time(self) -> float:
         return self.step_count * self.config.dt
-
-    def _warn_heavy_gravity(self):
-        """Says when gravity presses resting bodies deeper than half the smallest one's size
-        (soft_step.resting_sag), with the substeps that would hold them: silent before, a ball
-        under 1e6 m/s^2 sat 0.5 m deep in the ground."""
-        from .solvers.soft_step import resting_sag
-
-        h = self.model.host
-        dynamic = h["body_inv_mass"] > 0
-        if not dynamic.any():
-            return
-        half = np.where(h["body_shape"] == SHAPE_SPHERE, h["body_size"][:, 0], h["body_size"].min(axis=1))
-        smallest = float(half[dynamic].min())
-        c = self.config
-        sag = resting_sag(c.gravity, self.substep_dt, c.contact_hertz, c.damping_ratio)
-        if sag <= 0.5 * smallest:
-            return
-        # the sag goes with h^2 (a2 is fixed while the contact frequency follows the substep rate)
-        need = math.ceil(self.substeps * math.sqrt(sag / (0.5 * smallest)))
-        warnings.warn(f"gravity of {float(np.linalg.norm(c.gravity)):.3g} m/s^2 at substeps of {self.substep_dt:.3g} s "
-                      f"presses resting bodies about {sag:.3g} m into what holds them, more than half the "
-                      f"smallest body's size ({smallest:.3g} m); use [sim] substeps >= {need}", RuntimeWarning,
-                      stacklevel=3)
 
     @property
     def substep_dt(self) -> float:
