@@ -84,3 +84,8 @@ def test_earth_gravity_keeps_the_push_cap_it_is_given():
     soft = soft_coefficients(H, None, 10.0, 0.0)
     assert push_cap(3.0, (0.0, -9.81, 0.0), H, soft) == 3.0  # the default scenes are bit for bit as before
     assert push_cap(3.0, (0.0, -1.0e5, 0.0), H, soft) == pytest.approx(2.0 * 1.0e5 * H / A2, rel=1e-5)
+
+
+def test_gravity_no_substeps_can_hold_says_so_instead_of_naming_too_many():
+    with pytest.warns(RuntimeWarning, match=r"even 4096 substeps \(the most allowed\) would not hold them"):
+        resting("sphere", 0.25, 1.0e12, "cpu")

@@ -257,7 +257,7 @@ def check_terrain_resolution(terrain, columns: dict, per_edge: int, where: str =
 
 
 def warn_heavy_gravity(model, config, substeps: int):
-    """Says when gravity presses resting bodies deeper than half the smallest one's size
+    """Says when gravity presses resting bodies deeper than half the smallest radius or half extent
     (solvers/soft_step.resting_sag), with the substeps that would hold them: silent before, a
     ball under 1e6 m/s^2 sat 0.5 m deep in the ground."""
     from .solvers.soft_step import resting_sag
@@ -275,10 +275,14 @@ def warn_heavy_gravity(model, config, substeps: int):
         return
     # the sag goes with h^2 (a2 is fixed while the contact frequency follows the substep rate)
     need = math.ceil(substeps * math.sqrt(sag / (0.5 * smallest)))
+    from .validation import SIM_SCHEMA
+
+    most = SIM_SCHEMA["substeps"].le
+    advice = (f"use [sim] substeps >= {need}" if need <= most else
+              f"even {most} substeps (the most allowed) would not hold them: lower dt or the gravity")
     warnings.warn(f"gravity of {float(np.linalg.norm(config.gravity)):.3g} m/s^2 at substeps of {step:.3g} s "
-                  f"presses resting bodies about {sag:.3g} m into what holds them, more than half the "
-                  f"smallest body's size ({smallest:.3g} m); use [sim] substeps >= {need}", RuntimeWarning,
-                  stacklevel=3)
+                  f"presses resting bodies about {sag:.3g} m into what holds them, more than half the smallest "
+                  f"radius or half extent ({smallest:.3g} m); {advice}", RuntimeWarning, stacklevel=3)
 
 
 STEP_COUNT_MAX = 2**31 - 1  # the step counter is an int32 on the device
