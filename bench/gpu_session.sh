@@ -60,9 +60,12 @@ PYEOF
 files=$(echo $files)
 if [ -n "${CUDA_CACHE:-}" ] && [ -f "$CUDA_CACHE" ]; then
     # cubins built ahead of time (bench/cuda_cache.py) for these very sources: no NVRTC here
-    cache_dir=$(python3 -c "import warp as wp; wp.config.quiet = True; wp.init(); print(wp.config.kernel_cache_dir)")
-    mkdir -p "$cache_dir" && tar -xJf "$CUDA_CACHE" -C "$cache_dir" && echo "[$(elapsed) s] unpacked $CUDA_CACHE" \
-        | tee -a "$OUT/environment.txt"
+    # the last line only: Warp may print its banner (with the same path) before it
+    cache_dir=$(python3 -c "import warp as wp; wp.config.log_level = wp.LOG_WARNING; wp.init(); \
+print(wp.config.kernel_cache_dir)" 2>/dev/null | tail -n 1)
+    case "$cache_dir" in /*) ;; *) echo "no kernel cache folder found: $CUDA_CACHE not unpacked"; cache_dir="" ;; esac
+    [ -n "$cache_dir" ] && mkdir -p "$cache_dir" && tar -xJf "$CUDA_CACHE" -C "$cache_dir" \
+        && echo "[$(elapsed) s] unpacked $CUDA_CACHE into $cache_dir" | tee -a "$OUT/environment.txt"
 fi
 timeout 300 python3 bench/gpu.py --compile-only --device "$DEVICE" --out "$OUT" 2>&1 | tee -a "$OUT/environment.txt"
 # the tests get at most half of what is left after the compile (a cold kernel cache costs minutes)
