@@ -117,3 +117,39 @@ def test_cuda_cache_packs_each_modules_cubin_and_meta_in_its_cache_folder(tmp_pa
     folders = {n.split("/")[0] for n in names}
     assert len(folders) == 1 and next(iter(folders)).startswith("wp_warp_sim.prefix_sum_")
     assert any(n.endswith(".sm90.cubin") for n in names) and any(n.endswith(".meta") for n in names)
+
+
+def test_the_device_session_unpacks_a_cuda_cache_into_warps_kernel_cache(tmp_path):
+    """CUDA_CACHE (bench/cuda_cache.py's archive) lands in Warp's kernel-cache folder: a dry run
+    once read Warp's start-up banner as that folder's path and unpacked 34 files into a stray
+    folder of the checkout."""
+    import os
+    import subprocess
+    import tarfile
+    from pathlib import Path
+
+    import warp as wp
+
+    wp.init()  # sets wp.config.kernel_cache_dir
+    root = Path(__file__).resolve().parents[1]
+    before = set(os.listdir(root))
+    archive = tmp_path / "cache.tar.xz"
+    marker = tmp_path / "wp_probe_0000000"
+    marker.mkdir()
+    (marker / "wp_probe_0000000.meta").write_text("{}")
+    with tarfile.open(archive, "w:xz") as tar:
+        tar.add(marker / "wp_probe_0000000.meta", arcname="wp_probe_0000000/wp_probe_0000000.meta")
+    out = tmp_path / "out"
+    env = dict(os.environ, OUT=str(out), DEVICE="cpu", GPU_ARGS="--quick --parts graph_probe", TEST_BUDGET="5",
+               CALL_BUDGET="60", CUDA_CACHE=str(archive))
+    done = subprocess.run(["bash", str(root / "bench" / "gpu_session.sh")], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    unpacked = Path(wp.config.kernel_cache_dir) / "wp_probe_0000000" / "wp_probe_0000000.meta"
+    try:
+        assert f"into {wp.config.kernel_cache_dir}" in done.stdout and unpacked.exists()
+    finally:
+        if unpacked.exists():
+            unpacked.unlink()
+            unpacked.parent.rmdir()
+    assert set(os.listdir(root)) <= before | {".pytest_cache"}  # nothing new beside the sources
