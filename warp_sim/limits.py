@@ -37,7 +37,7 @@ import warnings
 
 import numpy as np
 
-from .validation import ValidationError
+from .validation import SIM_SCHEMA, ValidationError
 
 # Bytes per item (see the module docstring), rounded up.
 BYTES_PER_BODY = 1600  # builder columns, float64 work arrays, Model host + device, 2 States, per-body pipeline
@@ -275,8 +275,6 @@ def warn_heavy_gravity(model, config, substeps: int):
         return
     # the sag goes with h^2 (a2 is fixed while the contact frequency follows the substep rate)
     need = math.ceil(substeps * math.sqrt(sag / (0.5 * smallest)))
-    from .validation import SIM_SCHEMA
-
     most = SIM_SCHEMA["substeps"].le
     advice = (f"use [sim] substeps >= {need}" if need <= most else
               f"even {most} substeps (the most allowed) would not hold them: lower dt or the gravity")

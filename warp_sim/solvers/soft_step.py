@@ -92,31 +92,33 @@ def soft_coefficients(h: float, contact_hertz: float | None, damping_ratio: floa
 HOLD_MARGIN = 2.0  # a body carrying one like it on top
 
 
-def push_cap(max_push_velocity: float, gravity, h: float, soft) -> float:
-    """The push-out speed cap of the biased sweeps: ``max_push_velocity``, but never below what a
-    resting contact needs to hold its body up.
+def hold_speed(gravity, h: float, soft) -> float:
+    """The push-out speed a resting contact needs to hold its body up.
 
     A body at rest takes the impulse m g h a substep from its contacts.  The soft update
     (contact_rows: new = acc - massScale m (vn + bias) - impulseScale acc) holds that steady
     with vn = 0 only if impulseScale acc = -massScale m bias, that is at a bias speed of
     g h impulseScale / massScale = g h / a2 (a2 = h omega (2 zeta + h omega): 33.9 at the
-    defaults, whatever h).  A cap below it cannot hold: the body sinks at the difference for ever,
-    with no error (a 0.25 m ball under 2.9e4 m/s^2 went down 8.8 mm a step; the defaults' 3 m/s
-    cap holds up to g = 3 a2 / h = 2.4e4 at 4 substeps of 1/60 s).  At 9.81 m/s^2 the hold speed
-    is 1.2 mm/s, so the cap is the setting."""
+    defaults, whatever h)."""
     g = math.sqrt(sum(float(c) * float(c) for c in gravity))
-    hold = g * h * float(soft[2]) / float(soft[1]) if float(soft[1]) > 0.0 else 0.0
-    return max(float(max_push_velocity), HOLD_MARGIN * hold)
+    return g * h * float(soft[2]) / float(soft[1]) if float(soft[1]) > 0.0 else 0.0
+
+
+def push_cap(max_push_velocity: float, gravity, h: float, soft) -> float:
+    """The push-out speed cap of the biased sweeps: ``max_push_velocity``, but never below twice
+    the hold speed.  A cap below it cannot hold: the body sinks at the difference for ever, with
+    no error (a 0.25 m ball under 2.9e4 m/s^2 went down 8.8 mm a step; the defaults' 3 m/s cap
+    holds up to g = 3 a2 / h = 2.4e4 at 4 substeps of 1/60 s).  At 9.81 m/s^2 the hold speed is
+    1.2 mm/s, so the cap is the setting."""
+    return max(float(max_push_velocity), HOLD_MARGIN * hold_speed(gravity, h, soft))
 
 
 def resting_sag(gravity, h: float, contact_hertz: float | None, damping_ratio: float) -> float:
     """How deep a resting body settles past the soft depth: its contact must push out at the hold
-    speed g h / a2 (push_cap), which the excess rule of closed_contact_bias, (s + d) / h, reaches
-    at s + d = g h^2 / a2.  Measured on a plane, a 0.25 m ball: 0.05 m at 1e5 m/s^2 and 0.5 m at
-    1e6, as this gives, at 4 substeps of 1/60 s."""
-    soft = soft_coefficients(h, contact_hertz, damping_ratio, 0.0)
-    g = math.sqrt(sum(float(c) * float(c) for c in gravity))
-    return g * h * h * float(soft[2]) / float(soft[1])
+    speed, which the excess rule of closed_contact_bias, (s + d) / h, reaches at
+    s + d = h x hold speed = g h^2 / a2.  Measured on a plane, a 0.25 m ball: 0.05 m at 1e5 m/s^2
+    and 0.5 m at 1e6, as this gives, at 4 substeps of 1/60 s."""
+    return h * hold_speed(gravity, h, soft_coefficients(h, contact_hertz, damping_ratio, 0.0))
 
 
 def soft_load(h: float, gravity, contact_hertz: float | None, damping_ratio: float) -> wp.vec3:
