@@ -46,6 +46,8 @@ VARIANTS = {
     "fast: that and relax_passes 1": {"turn_refresh": 0.0, "recollide_outrun": False, "relax_passes": 1},
     # the impact stage run on this inelastic rain too (SimConfig.impacts), the accurate choice
     "impacts always": {"impacts": "always"},
+    # friction at the manifold's points (the corners) instead of the patch's arms (collide/contact_patch.py)
+    "face friction at points": {"face_friction": "points"},
 }
 
 # Per-stage split.  This host's speed swings by up to 2x over minutes (other tenants), so one

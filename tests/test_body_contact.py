@@ -269,13 +269,16 @@ def test_a_column_standing_inside_a_table_edge_stands_and_one_outside_falls(coun
     assert column_at_a_table_edge(count, half, -0.02, weights, device) > 30.0
 
 
-@pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: stacks at an edge): a column of six "
-                   "blocks 5 mm inside a table's edge topples; walking a cold pair's points to convergence in its "
-                   "first sweep saved the equal masses only, and was not kept")
-@pytest.mark.parametrize("masses", ["equal", "random"])
+@pytest.mark.parametrize("masses", [
+    "equal",
+    pytest.param("random", marks=pytest.mark.xfail(strict=True, reason=(
+        "known limitation (README, design notes: stacks at an edge): a column of six blocks of unequal "
+        "masses 5 mm inside a table's edge topples")))])
 def test_a_column_of_six_five_mm_inside_a_table_edge_stands(masses, device):
-    """Statics says it stands (its centre 0.5 % of a block's length inside the edge); measured: it
-    falls, the bottom block past 40 degrees in 3 s (2.5 mm inside: every column of six tried)."""
+    """Statics says it stands (its centre 0.5 % of a block's length inside the edge).  Measured:
+    equal masses stand (0.08 degrees after 3 s; they fell past 78 degrees until a cold contact's
+    friction acted at the patch's arms, collide/contact_patch.py), the random masses fall past 40 degrees
+    (2.5 mm inside: every column of six tried)."""
     rng = np.random.default_rng(6)
     weights = np.ones(6) if masses == "equal" else rng.uniform(0.5, 2.0, 6)
     assert column_at_a_table_edge(6, (0.5, 0.1, 0.2), 0.005, weights, device) < 1.0

@@ -96,7 +96,8 @@ def refresh(case, tolerance=0.0, device="cpu"):
         0, shape, half, bound, arrays([0, 0], wp.int32, device), inv_mass, MARGIN, tolerance, pos, rot, ref_pos,
         ref_rot,
         bound, arrays([1], wp.int32, device), wp.array([wp.vec2i(0, 1)], dtype=wp.vec2i, device=device),
-        count, n, points, depths, features, impulses, tangents, refreshed])
+        count, n, points, depths, features, impulses, tangents, refreshed, 1,
+        wp.zeros(1, dtype=wp.vec4, device=device)])
     model = BodyModel()  # the fields pair_point_now reads
     model.body_sphere_radius, model.body_inv_mass, model.body_size = radius, inv_mass, half
     model.body_covered_faces = arrays([0, 0], wp.int32, device)

@@ -40,8 +40,8 @@ def carry(prev_points, prev_features, prev_normal, new_points, new_features, sam
         wp.array([len(new_points)], dtype=wp.int32, device=device),
         slots(new_features, wp.int32, 0),
         wp.array([wp.vec3(np.sin(turn), np.cos(turn), 0.0)], dtype=wp.vec3, device=device),
-        slots(new_points, wp.vec3, np.zeros(3)),
-        normal, tangent_out])
+        slots(new_points, wp.vec3, np.zeros(3)), slots([], float, 0.0), 1,
+        normal, tangent_out, wp.zeros(1, dtype=wp.vec4, device=device)])
     return normal.numpy()[: len(new_points)], tangent_out.numpy()[: len(new_points)]
 
 

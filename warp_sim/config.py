@@ -30,7 +30,7 @@ class NonFiniteStateError(RuntimeError):
 # The fields SimConfig hands to the solver under the same names (SimConfig.solver_settings).
 SOLVER_FIELDS = ("integrator", "rotation", "iterations", "relax_iterations", "relax_passes", "contact_hertz",
                  "damping_ratio", "max_push_velocity", "restitution_threshold", "convergence_tolerance",
-                 "convergence_gravity_share", "solver", "overflow_pairs", "impacts")
+                 "convergence_gravity_share", "solver", "overflow_pairs", "impacts", "face_friction")
 
 
 @dataclass
@@ -55,6 +55,10 @@ class SimConfig:
     # the impact stage (impact.py): "auto" runs it where some body has restitution, "always" in
     # inelastic scenes too (their impacts converged apart from the soft solve, at its cost)
     impacts: str = "auto"
+    # where a face's friction acts (collide/contact_patch.py): "patch" turns it about the normal as
+    # even pressure over the face does; "points" at the manifold's points (the corners: 1.85 times
+    # the torque for a square, and faster)
+    face_friction: str = "patch"
     convergence_tolerance: float = 1.0e-5
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"

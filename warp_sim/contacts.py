@@ -87,6 +87,9 @@ class Contacts:
         # 1 where the pair's last relax let go of enough push to walk it down to the ground
         # (pair_solve.relax_chain_needed; written by pair_pass, read by chain_pass)
         self.pair_relax_chain = wp.zeros(m, dtype=wp.int32, device=device)
+        # the patch of the pair's points for the substep, written by its warm start: centre and the
+        # scale of its friction rows' arms (collide/contact_patch.py)
+        self.pair_twist = wp.zeros(m, dtype=wp.vec4, device=device)
         # times the pair was found again mid-step since the pass that found it (solvers/
         # pair_refresh.py; the pass writes 0): one writer per pair, a sum and not a shared counter
         self.pair_refresh_count = wp.zeros(m, dtype=wp.int32, device=device)

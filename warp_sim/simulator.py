@@ -346,6 +346,7 @@ class Simulator:
         stepping checks on the host right after the broad phase; a captured step raises the
         device flag that ``step`` reads)."""
         state = self.states[0] if state is None else state
+        self.pairs.measure_patch = self.config.face_friction == "patch"  # collide/contact_patch.py
 
         def grow(demand: int):
             if self.config.contact_max:

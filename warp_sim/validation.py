@@ -34,6 +34,7 @@ CONTACT_UPDATES = ("step", "substep")
 PAIR_SCHEDULES = ("auto", "domains", "colors")
 OVERFLOW_PAIRS = ("auto", "split", "in_order")
 IMPACT_STAGES = ("auto", "always")
+FACE_FRICTIONS = ("patch", "points")  # collide/contact_patch.py
 BODY_ORDERS = ("scene", "morton", "shape_morton")  # body_order.py
 
 
@@ -404,6 +405,7 @@ SIM_SCHEMA = {
     "max_push_velocity": Number(gt=0),
     "restitution_threshold": Number(ge=0),
     "impacts": Choice(IMPACT_STAGES),
+    "face_friction": Choice(FACE_FRICTIONS),
     "convergence_tolerance": Number(ge=0),
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),

@@ -15,6 +15,7 @@ features and impulses into the ``prev_*`` arrays once the solve is done.
 
 import warp as wp
 
+from .contact_patch import NO_TWIST, pair_patch, patch_twist
 from .primitives import collide_pair, mat43
 
 wp.set_module_options({"enable_backward": False})
@@ -345,11 +346,16 @@ def carry_pair_impulses(
     pair_feature: wp.array(dtype=wp.int32),
     pair_normal: wp.array(dtype=wp.vec3),
     pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
+    measure_patch: int,
     # Out
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
+    pair_twist: wp.array(dtype=wp.vec4),
 ):
-    """Each new point takes the impulses of last pass's point that ``match_old_points`` gives it.
+    """Each new point takes the impulses of last pass's point that ``match_old_points`` gives it,
+    and the pair's patch is measured from them (where its friction acts until the next pass or
+    refresh: contact_patch.py).
 
     Why the fallback: two equal boxes resting face on face have their incident corners exactly on
     the reference face's side planes, so a rounding-level turn decides whether a point is a corner
@@ -381,6 +387,10 @@ def carry_pair_impulses(
             tangent_impulse = prev_pair_tangent_impulse[old]
         pair_normal_impulse[slot] = normal_impulse
         pair_tangent_impulse[slot] = tangent_impulse
+    twist = NO_TWIST
+    if measure_patch != 0:
+        twist = patch_twist(pair_patch(p, count, pair_normal, pair_point, pair_depth, pair_normal_impulse))
+    pair_twist[p] = twist
 
 
 @wp.kernel

@@ -43,6 +43,8 @@ class PairContactPipeline:
         self.colors = colors or domain_count == 0
         self.color_overflow_reported = False
         self.schedule = None
+        # each pair's patch, where its friction acts (contact_patch.py; SimConfig.face_friction)
+        self.measure_patch = True
         if domain_count > 0:
             d = domain_count
             self.body_weight = wp.zeros(n, dtype=float, device=device)
@@ -112,7 +114,9 @@ class PairContactPipeline:
             contacts.prev_pair_feature, contacts.prev_pair_normal, contacts.prev_pair_point,
             contacts.prev_pair_normal_impulse, contacts.prev_pair_tangent_impulse,
             contacts.pair_count, contacts.pair_body, contacts.pair_point_count, contacts.pair_feature,
-            contacts.pair_normal, contacts.pair_point, contacts.pair_normal_impulse, contacts.pair_tangent_impulse], device=self.device)
+            contacts.pair_normal, contacts.pair_point, contacts.pair_depth, int(self.measure_patch),
+            contacts.pair_normal_impulse, contacts.pair_tangent_impulse, contacts.pair_twist],
+            device=self.device)
         if self.colors:
             self.coloring.run(m.body_inv_mass, contacts, None if self.capturable else self.live_dim)
         if self.domain_count > 0:

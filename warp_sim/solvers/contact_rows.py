@@ -25,6 +25,8 @@ they save.
 
 import warp as wp
 
+from ..collide.contact_patch import twist_arm
+
 wp.set_module_options({"enable_backward": False})
 
 
@@ -136,6 +138,7 @@ def friction_step(vt1: float, vt2: float, old_t: wp.vec3, t1: wp.vec3, t2: wp.ve
 def solve_terrain_row(
     slot: int,
     arm: wp.vec3,
+    twist: wp.vec4,
     n: wp.vec3,
     separation: float,
     v: wp.vec3,
@@ -153,8 +156,10 @@ def solve_terrain_row(
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
 ) -> wp.spatial_vector:
     """One sweep over one terrain contact (slot, arm r = p - x_ref, normal n): the normal row
-    (soft_step.py gives the soft-constraint algebra), then the friction block.  Returns the new
-    (w, v) as a spatial vector.
+    (soft_step.py gives the soft-constraint algebra), then the friction block, acting at the arm
+    the body's patch ``twist`` gives (collide/contact_patch.py: r with its offset in the plane from
+    the patch's centre scaled).
+    Returns the new (w, v) as a spatial vector.
 
     The rows are built here, in registers, and never stored: a stored row is 144 bytes a contact
     that every sweep reads back, against 32 for the slot index, point, normal and depth it is
@@ -198,11 +203,13 @@ def solve_terrain_row(
     v = v + (inv_mass * d) * n
     w = w + d * inv_rn
 
-    # tangent rows: t1, t2 an orthonormal basis of the plane, K_t the 2 x 2 block (module docstring)
+    # tangent rows: t1, t2 an orthonormal basis of the plane, K_t the 2 x 2 block (module docstring),
+    # at the patch's friction arm (built only here: most rows are idle and returned above)
+    friction_arm = twist_arm(arm, arm, n, twist)
     t1 = plane_basis_first(n)
     t2 = wp.cross(n, t1)
-    rt1 = wp.cross(arm, t1)
-    rt2 = wp.cross(arm, t2)
+    rt1 = wp.cross(friction_arm, t1)
+    rt2 = wp.cross(friction_arm, t2)
     inv_rt1 = inv_inertia * rt1
     inv_rt2 = inv_inertia * rt2
     tangent_k = wp.vec3(inv_mass + wp.dot(rt1, inv_rt1), wp.dot(rt1, inv_rt2), inv_mass + wp.dot(rt2, inv_rt2))

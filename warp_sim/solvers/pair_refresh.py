@@ -48,6 +48,7 @@ one on the same faces (narrow_phase.match_old_points), so the warm start survive
 import warp as wp
 
 from ..launch import launch
+from ..collide.contact_patch import pair_patch, patch_twist
 from ..collide.narrow_phase import POINTS, match_old_points
 from ..collide.primitives import SHAPE_SPHERE, collide_pair, mat43
 from .pair_geometry import anchor_weight
@@ -109,6 +110,8 @@ def refresh_turned_pairs(
     pair_normal_impulse: wp.array(dtype=float),
     pair_tangent_impulse: wp.array(dtype=wp.vec3),
     pair_refresh_count: wp.array(dtype=wp.int32),
+    measure_patch: int,
+    pair_twist: wp.array(dtype=wp.vec4),
 ):
     p = wp.tid() + tid_offset
     if p >= pair_count[0]:
@@ -183,6 +186,10 @@ def refresh_turned_pairs(
         pair_normal_impulse[slot] = normal_impulse[k]
         pair_tangent_impulse[slot] = wp.vec3(tangent_impulse[k, 0], tangent_impulse[k, 1], tangent_impulse[k, 2])
     pair_refresh_count[p] = pair_refresh_count[p] + 1
+    # the new points' patch (collide/contact_patch.py), from the impulses they took over
+    if measure_patch != 0:
+        pair_twist[p] = patch_twist(pair_patch(p, m.count, pair_normal, pair_point, pair_depth,
+                                               pair_normal_impulse))
 
 
 def refresh_turned(model, state, solver, pairs, contacts, margin: float, tolerance: float):
@@ -196,4 +203,5 @@ def refresh_turned(model, state, solver, pairs, contacts, margin: float, toleran
         tolerance,
         state.body_pos, state.body_rot, solver.solver_ref_pos, solver.solver_ref_rot, pairs.body_reach,
         c.pair_count, c.pair_body, c.pair_point_count, c.pair_normal, c.pair_point, c.pair_depth, c.pair_feature,
-        c.pair_normal_impulse, c.pair_tangent_impulse, c.pair_refresh_count], device=state.body_pos.device)
+        c.pair_normal_impulse, c.pair_tangent_impulse, c.pair_refresh_count,
+        int(solver.settings.face_friction == "patch"), c.pair_twist], device=state.body_pos.device)

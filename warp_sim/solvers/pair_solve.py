@@ -8,6 +8,7 @@ overflow colour's pairs may share bodies: on CUDA pair_overflow.py sweeps them w
 
 import warp as wp
 
+from ..collide.contact_patch import NO_TWIST, twist_arm
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair, pair_event_start
@@ -173,6 +174,11 @@ def solve_pair_points(
         t0 = pair_event_start(i, j, solver)
         if t0 >= settings.h:
             t0 = 0.0
+    # friction acts at the arms of the pair's patch (collide/contact_patch.py: measured when its
+    # points were found)
+    twist = NO_TWIST
+    if count > 1:
+        twist = pairs.pair_twist[p]
     for _pass in range(passes):
         before = vel
         normal_total = float(0.0)
@@ -193,8 +199,19 @@ def solve_pair_points(
             rj = now.arm_j
             acc = pairs.pair_normal_impulse[slot]
             if mode == MODE_WARM_START:
-                vel = apply_pair_impulse(vel, acc * n + pairs.pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj,
-                                         inv_ii, inv_ij)
+                if twist[3] >= 1.0:
+                    vel = apply_pair_impulse(vel, acc * n + pairs.pair_tangent_impulse[slot], ri, rj, inv_mi, inv_mj,
+                                             inv_ii, inv_ij)
+                else:
+                    # friction at the patch's arms (collide/contact_patch.py): one point of both bodies,
+                    # moved in the plane
+                    tangent = pairs.pair_tangent_impulse[slot]
+                    shift = twist_arm(ri, pairs.pair_point[slot], n, twist) - ri
+                    impulse = acc * n + tangent
+                    vel.vi = vel.vi + inv_mi * impulse
+                    vel.wi = vel.wi + inv_ii * (wp.cross(ri, impulse) + wp.cross(shift, tangent))
+                    vel.vj = vel.vj - inv_mj * impulse
+                    vel.wj = vel.wj - inv_ij * (wp.cross(rj, impulse) + wp.cross(shift, tangent))
             else:
                 separation = now.separation
                 # Non-penetration
@@ -241,22 +258,25 @@ def solve_pair_points(
                 new_acc = wp.max(acc + lam, 0.0)
                 pairs.pair_normal_impulse[slot] = new_acc
                 vel = apply_pair_impulse(vel, (new_acc - acc) * n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
-                # Friction: accumulated tangential impulse clamped to the Coulomb disc
-                vr = relative_velocity(vel, ri, rj)
+                # Friction: accumulated tangential impulse clamped to the Coulomb disc, at the patch's
+                # arms (collide/contact_patch.py): one point of both bodies, moved in the plane
+                ri_t = twist_arm(ri, pairs.pair_point[slot], n, twist)
+                rj_t = rj + (ri_t - ri)
+                vr = relative_velocity(vel, ri_t, rj_t)
                 vt = vr - wp.dot(vr, n) * n
                 old_t = old_t - wp.dot(old_t, n) * n
                 new_t = old_t
                 slip = wp.length(vt)
                 if slip > 1.0e-9:
                     tangent = vt / slip
-                    k_t = normal_mass_inverse(tangent, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                    k_t = normal_mass_inverse(tangent, ri_t, rj_t, inv_mi, inv_mj, inv_ii, inv_ij)
                     new_t = old_t - (slip / k_t) * tangent
                 limit = friction * new_acc
                 mag = wp.length(new_t)
                 if mag > limit:
                     new_t = new_t * (limit / mag)
                 pairs.pair_tangent_impulse[slot] = new_t
-                vel = apply_pair_impulse(vel, new_t - old_t, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij)
+                vel = apply_pair_impulse(vel, new_t - old_t, ri_t, rj_t, inv_mi, inv_mj, inv_ii, inv_ij)
                 normal_total = normal_total + new_acc
         if pair_change(before, vel, reach_i, reach_j) < settings.convergence_tolerance:
             break
@@ -369,15 +389,27 @@ def warm_start_pair_side(
     rot_ref = solver.solver_ref_rot
     if reset_reference != 0:
         rot_ref = state_in.body_rot
-    for k in range(pairs.pair_point_count[p]):
+    count = pairs.pair_point_count[p]
+    # as solve_pair_points' warm start: friction at the arms of the pair's patch (contact_patch.py)
+    twist = NO_TWIST
+    if count > 1:
+        twist = pairs.pair_twist[p]
+    for k in range(count):
         slot = p * POINTS + k
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[slot], pairs.pair_depth[slot],
                              pairs.pair_feature[slot], x_i, x_j, drift_pi, drift_pj, drift_ri, drift_rj, rot_ref, i, j,
                              model)
         arm = wp.where(side == 0, now.arm_i, now.arm_j)
-        impulse = sign * (pairs.pair_normal_impulse[slot] * now.normal + pairs.pair_tangent_impulse[slot])
-        v = v + inv_mass * impulse
-        w = w + inv_inertia * wp.cross(arm, impulse)
+        if twist[3] >= 1.0:
+            impulse = sign * (pairs.pair_normal_impulse[slot] * now.normal + pairs.pair_tangent_impulse[slot])
+            v = v + inv_mass * impulse
+            w = w + inv_inertia * wp.cross(arm, impulse)
+        else:
+            tangent_part = sign * pairs.pair_tangent_impulse[slot]
+            impulse = sign * pairs.pair_normal_impulse[slot] * now.normal + tangent_part
+            shift = twist_arm(arm, pairs.pair_point[slot], now.normal, twist) - arm
+            v = v + inv_mass * impulse
+            w = w + inv_inertia * (wp.cross(arm, impulse) + wp.cross(shift, tangent_part))
     solver.solver_v[b] = v
     solver.solver_w[b] = w
 

@@ -41,6 +41,7 @@ import math
 
 import warp as wp
 
+from ..collide.contact_patch import NO_TWIST, patch_twist, terrain_patch, twist_arm
 from ..column_sag import contact_hertz as contact_frequency
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
@@ -148,6 +149,23 @@ def apply_impulse(
 
 
 @wp.func
+def apply_contact_impulse(vel: BodyVelocity, normal_part: wp.vec3, tangent_part: wp.vec3, arm: wp.vec3,
+                          n: wp.vec3, twist: wp.vec4, inv_mass: float, inv_inertia: wp.mat33) -> BodyVelocity:
+    """A contact's stored impulse, its friction part at the patch's friction arm (contact_patch.py); as
+    one impulse at ``arm`` where that is the arm itself.  A contact holding none (an idle
+    speculative one: most of a settled box's) changes nothing and is skipped."""
+    if twist[3] >= 1.0:
+        return apply_impulse(vel, normal_part + tangent_part, arm, inv_mass, inv_inertia)
+    if wp.length_sq(normal_part) == 0.0 and wp.length_sq(tangent_part) == 0.0:
+        return vel
+    out = vel
+    out.v = vel.v + inv_mass * (normal_part + tangent_part)
+    torque = wp.cross(arm, normal_part) + wp.cross(twist_arm(arm, arm, n, twist), tangent_part)
+    out.w = vel.w + inv_inertia * torque
+    return out
+
+
+@wp.func
 def drift_rotation(shape: int, rot_now: wp.mat33, rot_ref: wp.mat33) -> wp.mat33:
     """``D`` such that an anchor at arm r (taken when the contact was found) has moved by
     dp + D r since then, dp being the centre's displacement.
@@ -181,6 +199,7 @@ def solve_terrain_contact(
     terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    twist: wp.vec4,
 ) -> BodyVelocity:
     n = terrain_contact_normal[slot]
     arm = terrain_contact_point[slot] - x
@@ -209,8 +228,10 @@ def solve_terrain_contact(
     terrain_contact_normal_impulse[slot] = new_acc
     vel = apply_impulse(vel, (new_acc - acc) * n, arm, inv_mass, inv_inertia)
 
-    # Friction: clamp the accumulated tangential impulse to the Coulomb disc
-    vp = vel.v + wp.cross(vel.w, arm)
+    # Friction: clamp the accumulated tangential impulse to the Coulomb disc, at the patch's
+    # friction arm (contact_patch.py)
+    friction_arm = twist_arm(arm, arm, n, twist)
+    vp = vel.v + wp.cross(vel.w, friction_arm)
     vt = vp - wp.dot(vp, n) * n
     old_t = terrain_contact_tangent_impulse[slot]
     old_t = old_t - wp.dot(old_t, n) * n
@@ -218,7 +239,7 @@ def solve_terrain_contact(
     slip = wp.length(vt)
     if slip > 1.0e-9:
         t = vt / slip
-        rt = wp.cross(arm, t)
+        rt = wp.cross(friction_arm, t)
         k_t = inv_mass + wp.dot(rt, inv_inertia * rt)
         new_t = old_t - (slip / k_t) * t
     limit = friction * new_acc
@@ -226,7 +247,7 @@ def solve_terrain_contact(
     if mag > limit:
         new_t = new_t * (limit / mag)
     terrain_contact_tangent_impulse[slot] = new_t
-    return apply_impulse(vel, new_t - old_t, arm, inv_mass, inv_inertia)
+    return apply_impulse(vel, new_t - old_t, friction_arm, inv_mass, inv_inertia)
 
 
 @wp.func
@@ -281,6 +302,7 @@ def sweep(
     terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
+    twist: wp.vec4,
 ) -> BodyVelocity:
     for slot in range(start, start + count):
         if terrain_contact_active[slot] != 0:
@@ -291,7 +313,7 @@ def sweep(
             vel = solve_terrain_contact(slot, x, vel, inv_mass, inv_inertia, friction, h, use_bias, soft,
                                   max_push_velocity, gap_shift, terrain_contact_point, terrain_contact_normal,
                                   terrain_contact_depth, terrain_contact_normal_impulse,
-                                  terrain_contact_tangent_impulse)
+                                  terrain_contact_tangent_impulse, twist)
             if rolling_limit_per_impulse > 0.0:
                 vel = solve_rolling(vel, terrain_contact_normal[slot], inv_inertia,
                                     rolling_limit_per_impulse * terrain_contact_normal_impulse[slot])
@@ -306,18 +328,21 @@ def warm_start_terrain(
     vel: BodyVelocity,
     inv_mass: float,
     inv_inertia: wp.mat33,
+    twist: wp.vec4,
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
     terrain_contact_normal: wp.array(dtype=wp.vec3),
     terrain_contact_normal_impulse: wp.array(dtype=float),
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3),
 ) -> BodyVelocity:
-    """Re-apply last substep's accumulated impulses of the body's active terrain slots."""
+    """Re-apply last substep's accumulated impulses of the body's active terrain slots (friction at
+    the arms of the patch ``twist``, contact_patch.py)."""
     for slot in range(start, start + count):
         if terrain_contact_active[slot] != 0:
             n = terrain_contact_normal[slot]
-            warm = terrain_contact_normal_impulse[slot] * n + terrain_contact_tangent_impulse[slot]
-            vel = apply_impulse(vel, warm, terrain_contact_point[slot] - x, inv_mass, inv_inertia)
+            vel = apply_contact_impulse(vel, terrain_contact_normal_impulse[slot] * n,
+                                        terrain_contact_tangent_impulse[slot], terrain_contact_point[slot] - x,
+                                        n, twist, inv_mass, inv_inertia)
     return vel
 
 
@@ -414,7 +439,14 @@ def solve_and_integrate(
         toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
 
     # Warm start
-    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, slots.terrain_contact_active,
+    # friction acts at the arms of the patch the carried impulses make (contact_patch.py), for the substep
+    twist = NO_TWIST
+    if settings.face_patch != 0:
+        twist = patch_twist(terrain_patch(start, count, 0, x, rot, friction, slots.terrain_contact_active,
+                                          slots.terrain_contact_active, slots.terrain_contact_point,
+                                          slots.terrain_contact_normal, slots.terrain_contact_depth,
+                                          slots.terrain_contact_normal_impulse))
+    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, twist, slots.terrain_contact_active,
                              slots.terrain_contact_point, slots.terrain_contact_normal,
                              slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
 
@@ -427,7 +459,7 @@ def solve_and_integrate(
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, 1,
                         settings.soft, settings.max_push_velocity, zero, no_turn, slots.terrain_contact_active,
                         slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
-                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
             if sweep_converged(before, vel, reach, settings.convergence_tolerance):
                 break
 
@@ -451,7 +483,7 @@ def solve_and_integrate(
             vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,
                         settings.soft, settings.max_push_velocity, shift_v, shift_r, slots.terrain_contact_active,
                         slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
-                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
             if sweep_converged(before, vel, reach, settings.convergence_tolerance):
                 break
         new_angmom = angmom + world_inertia(rot, model.body_inertia[i]) * (vel.w - omega_free)

@@ -55,6 +55,7 @@ class SolverSettings:
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE
     solver: str = "soft_step"
     overflow_pairs: str = "auto"  # "auto": "split" on CUDA, "in_order" on the CPU (pair_overflow.py)
+    face_friction: str = "patch"  # "points": friction at the manifold's points (collide/contact_patch.py)
     impacts: str = "auto"  # "auto": the impact stage only in scenes with restitution; "always"
 
 
@@ -98,6 +99,8 @@ class SoftStepSolver:
         self.solver_event_partner = wp.full(n, -1, dtype=wp.int32, device=device)
         # the share of gravity each body's contacts held in the last substep (staged.support_share)
         self.solver_support = wp.zeros(n, dtype=float, device=device)
+        # each body's terrain patch: centre (as an arm) and friction arm scale (collide/contact_patch.py)
+        self.solver_twist = wp.zeros(n, dtype=wp.vec4, device=device)
 
     def _soft(self, dt: float):
         # one vec4 object per dt, so recorded launches see an unchanged argument
@@ -152,7 +155,7 @@ class SoftStepSolver:
         s = self.settings
         key = (dt, tuple(self.gravity), s.integrator, s.rotation, s.contact_hertz, s.damping_ratio, s.soft_depth,
                s.max_push_velocity, s.restitution_threshold, s.convergence_tolerance, s.convergence_gravity_share,
-               s.iterations, s.relax_iterations, s.relax_passes, s.impacts)
+               s.iterations, s.relax_iterations, s.relax_passes, s.impacts, s.face_friction)
         if getattr(self, "_settings_key", None) != key:
             # a new instance, never a changed one: recorded launches hold a packed copy (kernel_args.py)
             v = StepSettings()
@@ -166,6 +169,7 @@ class SoftStepSolver:
             v.iterations, v.relax_iterations = s.iterations, s.relax_iterations
             v.relax_passes = s.relax_passes
             v.impacts_always = int(s.impacts == "always")
+            v.face_patch = int(s.face_friction == "patch")
             self._settings_key, self._settings_value = key, v
         return self._settings_value
 

@@ -20,6 +20,7 @@ class StepSettings:
     max_push_velocity: float
     restitution_threshold: float
     impacts_always: int  # SolverSettings.impacts == "always": the impact stage in inelastic scenes too
+    face_patch: int  # SolverSettings.face_friction == "patch": friction at the patch's arms (contact_patch.py)
     convergence_tolerance: float
     iterations: int
     relax_iterations: int
@@ -49,6 +50,7 @@ class SolverBodies:
     solver_event_time: wp.array(dtype=float)  # when the body's last impact of the substep struck (impact.pair_event_start)
     solver_event_partner: wp.array(dtype=wp.int32)  # with which body (NO_EVENT, OTHER_EVENT: impact.py)
     solver_support: wp.array(dtype=float)  # share of gravity the last substep's solve held (staged.support_share)
+    solver_twist: wp.array(dtype=wp.vec4)  # terrain patch: centre (arm), friction arm scale (contact_patch.py)
     terrain_row_slot: wp.array(dtype=wp.int32)
     terrain_row_count: wp.array(dtype=wp.int32)
     impact_normal: wp.array(dtype=float)

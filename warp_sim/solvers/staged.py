@@ -33,12 +33,13 @@ restitution as max(e_i, e_j) (Box2D's rules).
 
 import warp as wp
 
+from ..collide.contact_patch import NO_TWIST, patch_twist, terrain_patch
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import solve_terrain_row
-from .soft_step import (BodyVelocity, apply_impulse, drift_rotation, solve_rolling, solve_sweeps, sweep_converged,
-                        warm_start_terrain)
+from .soft_step import (BodyVelocity, apply_contact_impulse, apply_impulse, drift_rotation, solve_rolling,
+                        solve_sweeps, sweep_converged, warm_start_terrain)
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -106,32 +107,49 @@ def prepare_body(
     x_ref = solver.solver_ref_pos[i]
     start = model.body_checkpoint_start[i]
     count = model.body_checkpoint_count[i]
+    # friction acts at the arms of the patch (collide/contact_patch.py) the impulses carried into the
+    # contacts make: measured where the rows are made (once a collision pass, over the rows listed),
+    # kept for later substeps and the sweeps
+    twist = NO_TWIST
     if make_rows != 0 and (reset_reference != 0 or make_rows == MAKE_ROWS_ALWAYS):
-        # the active slots listed and warm-started in one pass (the same impulses, in the same
-        # order, as warm_start_terrain); the list holds until the terrain contacts are found again
+        # the active slots listed, then warm-started in the same order as warm_start_terrain; the list
+        # holds until the terrain contacts are found again
         rows = int(0)
         for slot in range(start, start + count):
             if slots.terrain_contact_active[slot] != 0:
-                arm = slots.terrain_contact_point[slot] - x_ref
-                n = slots.terrain_contact_normal[slot]
                 solver.terrain_row_slot[start + rows] = slot
                 rows += 1
-                warm = (slots.terrain_contact_normal_impulse[slot] * n
-                        + slots.terrain_contact_tangent_impulse[slot])
-                vel = apply_impulse(vel, warm, arm, inv_mass, inv_inertia)
         solver.terrain_row_count[i] = rows
+        if settings.face_patch != 0:
+            twist = patch_twist(terrain_patch(start, rows, 1, x_ref, solver.solver_ref_rot[i],
+                                              model.body_friction[i], solver.terrain_row_slot,
+                                              slots.terrain_contact_active, slots.terrain_contact_point,
+                                              slots.terrain_contact_normal, slots.terrain_contact_depth,
+                                              slots.terrain_contact_normal_impulse))
+        solver.solver_twist[i] = twist
     elif make_rows != 0:
-        # the list of an earlier substep still holds: warm-start from it, same impulses, same order
+        twist = solver.solver_twist[i]  # the list of an earlier substep still holds, and its patch
+    if make_rows != 0:
         for k in range(solver.terrain_row_count[i]):
             slot = solver.terrain_row_slot[start + k]
-            warm = (slots.terrain_contact_normal_impulse[slot] * slots.terrain_contact_normal[slot]
-                    + slots.terrain_contact_tangent_impulse[slot])
-            vel = apply_impulse(vel, warm, slots.terrain_contact_point[slot] - x_ref, inv_mass, inv_inertia)
+            arm = slots.terrain_contact_point[slot] - x_ref
+            n = slots.terrain_contact_normal[slot]
+            vel = apply_contact_impulse(vel, slots.terrain_contact_normal_impulse[slot] * n,
+                                        slots.terrain_contact_tangent_impulse[slot], arm, n, twist, inv_mass,
+                                        inv_inertia)
     else:
         solver.terrain_row_count[i] = 0
-        vel = warm_start_terrain(start, count, x_ref, vel, inv_mass, inv_inertia, slots.terrain_contact_active,
-                                 slots.terrain_contact_point, slots.terrain_contact_normal,
-                                 slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+        if settings.face_patch != 0:
+            twist = patch_twist(terrain_patch(start, count, 0, x_ref, solver.solver_ref_rot[i],
+                                              model.body_friction[i], solver.terrain_row_slot,
+                                              slots.terrain_contact_active, slots.terrain_contact_point,
+                                              slots.terrain_contact_normal, slots.terrain_contact_depth,
+                                              slots.terrain_contact_normal_impulse))
+        solver.solver_twist[i] = twist
+        vel = warm_start_terrain(start, count, x_ref, vel, inv_mass, inv_inertia, twist,
+                                 slots.terrain_contact_active, slots.terrain_contact_point,
+                                 slots.terrain_contact_normal, slots.terrain_contact_normal_impulse,
+                                 slots.terrain_contact_tangent_impulse)
     solver.solver_v[i] = vel.v
     solver.solver_w[i] = vel.w
     solver.solver_inv_inertia[i] = inv_inertia
@@ -204,6 +222,7 @@ def sweep_body_terrain(
         passes = solve_sweeps(1, settings.relax_passes, count, holding)
     reach = wp.length(model.body_size[i])
     inv_inertia = solver.solver_inv_inertia[i]
+    twist = solver.solver_twist[i]  # where friction acts (contact_patch.py; prepare_body measured it)
     for _pass in range(passes):
         before = BodyVelocity()
         before.v = v
@@ -215,8 +234,8 @@ def sweep_body_terrain(
             n = slots.terrain_contact_normal[slot]
             # the gap found at the reference pose, grown by the anchor's motion since (drift_rotation)
             separation = -slots.terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
-            vw = solve_terrain_row(slot, arm, n, separation, v, w, inv_mass, inv_inertia, friction, settings.h,
-                                   use_bias, settings.soft, settings.max_push_velocity, load_mass, settings.soft_load,
+            vw = solve_terrain_row(slot, arm, twist, n, separation, v, w, inv_mass, inv_inertia, friction,
+                                   settings.h, use_bias, settings.soft, settings.max_push_velocity, load_mass, settings.soft_load,
                                    slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
             w = wp.spatial_top(vw)
             v = wp.spatial_bottom(vw)

@@ -1,0 +1,426 @@
+"""Friction about the contact normal of a face: where a manifold's friction rows act.
+
+A box resting on a face is held at a few points (its corners on the terrain, the clipped
+polygon's vertices against another box), and each point's friction is Coulomb's, |f_k| <=
+mu N_k.  Spinning about the normal, every point slips across its own radius, so the friction
+torque is sum mu N_k |u_k|, u_k the point's offset in the contact plane from the patch's centre:
+for a cube (half a) on its four corners mu N sqrt(2) a.  A face pressed evenly over its area
+resists with the mean distance of its area instead (Coulomb friction integrated over the
+rectangle of half sides a >= b, d = sqrt(a^2 + b^2)):
+
+    M = mu N r_e,   r_e = (2 a b d + a^3 ln((b + d) / a) + b^3 ln((a + d) / b)) / (6 a b)
+
+(a square: r_e = a (sqrt 2 + ln(1 + sqrt 2)) / 3 = 0.765 a; a segment, b -> 0: a / 2).  The corners
+overstate it by sqrt(2) a / r_e = 1.85 for a square, so a spinning cube stopped 1.85 times too
+soon.
+
+The fix moves where the friction rows act, not how much they may carry: each friction row of the
+manifold acts at the point whose offset in the contact plane is scaled by s = r_e / D about the
+patch's centre, D = sum N_k |u_k| / sum N_k the points' own mean radius.  Its relative velocity is
+measured at that same point, so the row is still an exact Coulomb row of a rigid body (friction at
+any point only dissipates), and with every point slipping in a spin the torque is s mu N D =
+mu N r_e.  The offset along the normal is kept, so friction's tipping moment (arm along n, force in
+the plane) and a straight slide (the in-plane torques of symmetric points cancel) are unchanged:
+only the moment about the normal changes.  The normal rows keep the true points.
+
+The patch is the points that hold a normal impulse, weighted by it (in a cold contact, where none
+holds one yet, the deepest points, equally: patch_weight).  A body's terrain patch is measured
+along the two axes of the body most nearly in the contact plane (terrain_patch): a face's corners,
+edge midpoints and centre span the rectangle it presses with, an edge a segment (b = 0); on
+curved ground that bounding rectangle is an approximation.  A pair's patch is the polygon of its
+at most four points in the contact plane, about their centroid (pair_patch): a face inside the
+other's is its rectangle exactly, a clipped polygon is itself, and no body's axes are needed (a
+pair found again mid-step, pair_refresh.py, stores points at its bodies' turned pose).  A
+manifold of one point, or none loaded, keeps its point (s = 1): spheres are untouched.
+
+Both are measured once a collision pass, from the impulses carried into it: the pair's in
+narrow_phase.carry_pair_impulses (and pair_refresh.py), the terrain's where prepare_body lists the
+body's rows; the warm start and every sweep read the stored centre and s (pair_twist,
+solver_twist).  Measured in every sweep instead, from the impulses of the moment, it cost more
+than all the rest of this (a pair's polygon takes angles and logarithms).  ``SimConfig.face_friction = "points"`` keeps the points (bit for bit the
+former solve, and a few per cent faster: README).  Impacts (solvers/impact.py) keep the true points
+for their friction.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+POINTS = 4  # a pair's point slots (collide/narrow_phase.py)
+# a cold patch's points count within this share of its size of the deepest one (tilts under 1e-3 rad
+# are flat)
+COLD_BAND = 1.0e-3
+# below this ratio of its sides a patch is a segment (r_e = a / 2 to a relative 1e-8 of a)
+SEGMENT_RATIO = 1.0e-4
+
+
+@wp.func
+def even_pressure_radius(a: float, b: float) -> float:
+    """Mean distance from the centre of a rectangle of half sides a, b (module docstring)."""
+    big = wp.max(a, b)
+    small = wp.min(a, b)
+    if big <= 0.0:
+        return 0.0
+    if small < SEGMENT_RATIO * big:
+        return 0.5 * big
+    d = wp.sqrt(big * big + small * small)
+    return (2.0 * big * small * d + big * big * big * wp.log((small + d) / big)
+            + small * small * small * wp.log((big + d) / small)) / (6.0 * big * small)
+
+
+@wp.struct
+class TwistPatch:
+    """A manifold's patch, built in two passes over its loaded points (patch_extend, then
+    patch_spread) with patch_centre between them, and closed by patch_finish; ``centre`` and
+    ``scale`` are what twist_arm needs."""
+
+    rot: wp.mat33  # the face's body's axes (columns)
+    lo: wp.vec3  # extents of the loaded points along the axes
+    hi: wp.vec3
+    along: wp.vec3  # weighted sums of their coordinates along the axes
+    normal: wp.vec3  # weighted sum of their normals
+    weight: float
+    points: int
+    face: int  # the axis nearest the contact normal
+    cold: int  # no point holds an impulse yet: the deepest ones, equally weighted (patch_weight)
+    cold_floor: float  # the depth a point of a cold patch reaches to count
+    spread: float
+    centre: wp.vec3
+    scale: float
+
+
+@wp.func
+def patch_begin(rot: wp.mat33) -> TwistPatch:
+    """An empty patch on a face of the body turned by ``rot``."""
+    patch = TwistPatch()
+    patch.rot = rot
+    patch.lo = wp.vec3(1.0e30)
+    patch.hi = wp.vec3(-1.0e30)
+    patch.along = wp.vec3(0.0)
+    patch.normal = wp.vec3(0.0)
+    patch.weight = 0.0
+    patch.points = 0
+    patch.face = 0
+    patch.cold = 0
+    patch.cold_floor = 0.0
+    patch.spread = 0.0
+    patch.centre = wp.vec3(0.0)
+    patch.scale = 1.0
+    return patch
+
+
+@wp.func
+def patch_weight(patch: TwistPatch, impulse: float, depth: float) -> float:
+    """A point's weight: the normal impulse it holds; in a cold patch (none holds one yet: a box
+    just landed or set down) 1 for the deepest points (within COLD_BAND of the patch's size: a
+    face set down flat, an edge landing first), so the first sweep's friction acts at the arms
+    later ones use (its impulse is clamped where it was applied, so the corners' torque taken there
+    stays: a plate set down spinning on a box lost 17 % more spin in its first step)."""
+    if patch.cold != 0:
+        return wp.where(depth >= patch.cold_floor, 1.0, 0.0)
+    return impulse
+
+
+@wp.func
+def cold_floor(deepest: float, size: float) -> float:
+    return deepest - COLD_BAND * size
+
+
+@wp.func
+def patch_extend(patch: TwistPatch, point: wp.vec3, n: wp.vec3, weight: float) -> TwistPatch:
+    """First pass: a loaded point (weight = its normal impulse > 0) widens the extents."""
+    if weight <= 0.0:
+        return patch
+    out = patch
+    local = wp.transpose(patch.rot) * point
+    out.lo = wp.min(patch.lo, local)
+    out.hi = wp.max(patch.hi, local)
+    out.along = patch.along + weight * local
+    out.normal = patch.normal + weight * n
+    out.weight = patch.weight + weight
+    out.points = patch.points + 1
+    return out
+
+
+@wp.func
+def patch_centre(patch: TwistPatch) -> TwistPatch:
+    """Between the passes: the face is the one whose axis lies nearest the mean normal; the centre
+    is the middle of the extents along the other two, at the weighted mean along that axis."""
+    out = patch
+    if patch.points < 2:
+        return out
+    n = wp.transpose(patch.rot) * patch.normal
+    face = int(0)
+    if wp.abs(n[1]) > wp.abs(n[0]) and wp.abs(n[1]) >= wp.abs(n[2]):
+        face = 1
+    elif wp.abs(n[2]) > wp.abs(n[0]) and wp.abs(n[2]) > wp.abs(n[1]):
+        face = 2
+    local = 0.5 * (patch.lo + patch.hi)
+    local[face] = patch.along[face] / patch.weight
+    out.face = face
+    out.centre = patch.rot * local
+    return out
+
+
+@wp.func
+def in_plane(offset: wp.vec3, n: wp.vec3) -> wp.vec3:
+    return offset - wp.dot(offset, n) * n
+
+
+@wp.func
+def patch_spread(patch: TwistPatch, point: wp.vec3, n: wp.vec3, weight: float) -> TwistPatch:
+    """Second pass: the loaded points' weighted radius about the centre, in the contact plane."""
+    if weight <= 0.0 or patch.points < 2:
+        return patch
+    out = patch
+    out.spread = patch.spread + weight * wp.length(in_plane(point - patch.centre, n))
+    return out
+
+
+@wp.func
+def patch_finish(patch: TwistPatch) -> TwistPatch:
+    """s = r_e / D (module docstring), at most 1; 1 where the patch is a single point."""
+    out = patch
+    out.scale = 1.0
+    if patch.points < 2 or patch.spread <= 0.0:
+        return out
+    mean_radius = patch.spread / patch.weight
+    half = 0.5 * (patch.hi - patch.lo)
+    r_e = even_pressure_radius(half[(patch.face + 1) % 3], half[(patch.face + 2) % 3])
+    out.scale = wp.clamp(r_e / mean_radius, 0.0, 1.0)
+    return out
+
+
+NO_TWIST = wp.constant(wp.vec4(0.0, 0.0, 0.0, 1.0))  # a patch of one point: friction at the point itself
+
+
+@wp.func
+def patch_twist(patch: TwistPatch) -> wp.vec4:
+    """What the sweeps keep of a patch: its centre and s (solver_twist, pair_twist)."""
+    return wp.vec4(patch.centre[0], patch.centre[1], patch.centre[2], patch.scale)
+
+
+@wp.func
+def twist_centre(twist: wp.vec4) -> wp.vec3:
+    return wp.vec3(twist[0], twist[1], twist[2])
+
+
+@wp.func
+def twist_arm(arm: wp.vec3, point: wp.vec3, n: wp.vec3, twist: wp.vec4) -> wp.vec3:
+    """The arm a friction row acts at: ``arm`` less (1 - s) of the offset of ``point`` (in the
+    frame the patch was measured in) from the patch's centre, taken in the contact plane."""
+    scale = twist[3]
+    if scale >= 1.0:
+        return arm
+    return arm - (1.0 - scale) * in_plane(point - twist_centre(twist), n)
+
+
+@wp.func
+def terrain_patch(
+    first: int,
+    count: int,
+    listed: int,
+    origin: wp.vec3,
+    rot: wp.mat33,
+    friction: float,
+    # Solver in
+    terrain_row_slot: wp.array(dtype=wp.int32),
+    # Contacts in
+    terrain_contact_active: wp.array(dtype=wp.int32),
+    terrain_contact_point: wp.array(dtype=wp.vec3),
+    terrain_contact_normal: wp.array(dtype=wp.vec3),
+    terrain_contact_depth: wp.array(dtype=float),
+    terrain_contact_normal_impulse: wp.array(dtype=float),
+) -> TwistPatch:
+    """The patch of a body's terrain contacts, as arms from ``origin``: its rows
+    terrain_row_slot[first + k], k < count, where ``listed`` (staged.py), else its active slots
+    first .. first + count (soft_step.py).  Weighted by the impulses they hold now (patch_weight)."""
+    patch = patch_begin(rot)
+    if count < 2 or friction <= 0.0:
+        return patch
+    for attempt in range(2):
+        patch.cold = attempt
+        if attempt == 1:
+            deepest = float(-1.0e30)
+            size = float(0.0)
+            for k in range(count):
+                slot = first + k
+                if listed != 0:
+                    slot = terrain_row_slot[first + k]
+                if listed != 0 or terrain_contact_active[slot] != 0:
+                    deepest = wp.max(deepest, terrain_contact_depth[slot])
+                    size = wp.max(size, wp.length(terrain_contact_point[slot] - origin))
+            patch.cold_floor = cold_floor(deepest, size)
+        for k in range(count):
+            slot = first + k
+            if listed != 0:
+                slot = terrain_row_slot[first + k]
+            if listed != 0 or terrain_contact_active[slot] != 0:
+                patch = patch_extend(patch, terrain_contact_point[slot] - origin, terrain_contact_normal[slot],
+                                     patch_weight(patch, terrain_contact_normal_impulse[slot],
+                                                  terrain_contact_depth[slot]))
+        if patch.points > 0:
+            break
+    patch = patch_centre(patch)
+    if patch.points < 2:
+        return patch
+    for k in range(count):
+        slot = first + k
+        if listed != 0:
+            slot = terrain_row_slot[first + k]
+        if listed != 0 or terrain_contact_active[slot] != 0:
+            patch = patch_spread(patch, terrain_contact_point[slot] - origin, terrain_contact_normal[slot],
+                                 patch_weight(patch, terrain_contact_normal_impulse[slot], terrain_contact_depth[slot]))
+    return patch_finish(patch)
+
+
+@wp.func
+def triangle_radius_integral(x1: float, y1: float, x2: float, y2: float) -> float:
+    """Integral of |r| over the triangle (origin, P1, P2), signed by its orientation: in polar
+    coordinates about the origin, the edge at distance d, points at t along it from the foot of
+    the perpendicular, rho = sqrt(d^2 + t^2):
+
+        int rho(psi)^3 / 3 dpsi = [d rho t / 6 + (d^3 / 6) ln(rho + t)]  from P1 to P2
+
+    (ln(rho + t) taken as ln(d^2 / (rho - t)) for t < 0, where rho + t cancels)."""
+    ex = x2 - x1
+    ey = y2 - y1
+    length = wp.sqrt(ex * ex + ey * ey)
+    if length <= 0.0:
+        return 0.0
+    d = (x1 * ey - y1 * ex) / length  # signed: positive for a counter-clockwise triangle
+    t1 = (x1 * ex + y1 * ey) / length
+    t2 = (x2 * ex + y2 * ey) / length
+    ad = wp.abs(d)
+    rho1 = wp.sqrt(x1 * x1 + y1 * y1)
+    rho2 = wp.sqrt(x2 * x2 + y2 * y2)
+    out = ad * (rho2 * t2 - rho1 * t1) / 6.0
+    if ad > 1.0e-12 * length:
+        log1 = wp.where(t1 >= 0.0, wp.log(rho1 + t1), wp.log(ad * ad / (rho1 - t1)))
+        log2 = wp.where(t2 >= 0.0, wp.log(rho2 + t2), wp.log(ad * ad / (rho2 - t2)))
+        out = out + ad * ad * ad * (log2 - log1) / 6.0
+    return wp.where(d >= 0.0, out, -out)
+
+
+@wp.func
+def quad_mean_radius(xs: wp.vec4, ys: wp.vec4, m: int) -> wp.vec3:
+    """Up to four points (coordinates about their centroid) as a convex polygon taken in angle
+    order: (mean |r| over its area about the origin, its area, and the farthest point's distance:
+    where the area is nil the patch is a segment, pair_patch)."""
+    angle = wp.vec4(0.0)
+    order = wp.vec4i(0, 1, 2, 3)
+    for k in range(m):
+        angle[k] = wp.atan2(ys[k], xs[k])
+    for a in range(1, m):  # insertion sort of at most four
+        b = a
+        while b > 0 and angle[order[b - 1]] > angle[order[b]]:
+            swap = order[b - 1]
+            order[b - 1] = order[b]
+            order[b] = swap
+            b -= 1
+    integral = float(0.0)
+    area = float(0.0)
+    far = float(0.0)
+    for k in range(m):
+        a = order[k]
+        b = order[(k + 1) % m]
+        integral += triangle_radius_integral(xs[a], ys[a], xs[b], ys[b])
+        area += 0.5 * (xs[a] * ys[b] - ys[a] * xs[b])
+        far = wp.max(far, wp.sqrt(xs[k] * xs[k] + ys[k] * ys[k]))
+    mean = float(0.0)
+    if area > 0.0:
+        mean = integral / area
+    return wp.vec3(mean, area, far)
+
+
+@wp.func
+def pair_patch(
+    p: int,
+    count: int,
+    # Contacts in
+    pair_normal: wp.array(dtype=wp.vec3),
+    pair_point: wp.array(dtype=wp.vec3),
+    pair_depth: wp.array(dtype=float),
+    pair_normal_impulse: wp.array(dtype=float),
+) -> TwistPatch:
+    """The patch of pair p's points (at most four, in the world as stored by the last pass or
+    refresh, which may have turned since the bodies' reference poses: so no body's axes) as the
+    polygon they span in the contact plane, about their centroid; weighted by the impulses they
+    hold now (patch_weight).  Where they span no area (an edge on a face) it is the segment
+    between the farthest two: r_e = half its half length."""
+    patch = patch_begin(wp.identity(n=3, dtype=float))
+    if count < 2:
+        return patch
+    n = pair_normal[p]
+    t1 = wp.normalize(wp.cross(n, wp.where(wp.abs(n[0]) < 0.9, wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0))))
+    t2 = wp.cross(n, t1)
+    origin = pair_point[p * POINTS]
+    xs = wp.vec4(0.0)
+    ys = wp.vec4(0.0)
+    ws = wp.vec4(0.0)
+    m = int(0)
+    for attempt in range(2):
+        patch.cold = attempt
+        if attempt == 1:
+            deepest = float(-1.0e30)
+            size = float(0.0)
+            for k in range(count):
+                deepest = wp.max(deepest, pair_depth[p * POINTS + k])
+                size = wp.max(size, wp.length(pair_point[p * POINTS + k] - origin))
+            patch.cold_floor = cold_floor(deepest, size)
+        for k in range(count):
+            slot = p * POINTS + k
+            weight = patch_weight(patch, pair_normal_impulse[slot], pair_depth[slot])
+            if weight > 0.0:
+                offset = pair_point[slot] - origin
+                xs[m] = wp.dot(offset, t1)
+                ys[m] = wp.dot(offset, t2)
+                ws[m] = weight
+                m += 1
+        if m > 0:
+            break
+    if m < 2:
+        return patch
+    cx = float(0.0)
+    cy = float(0.0)
+    for k in range(m):
+        cx += xs[k] / float(m)
+        cy += ys[k] / float(m)
+    for k in range(m):
+        xs[k] = xs[k] - cx
+        ys[k] = ys[k] - cy
+    polygon = quad_mean_radius(xs, ys, m)
+    r_e = polygon[0]
+    if polygon[1] <= 1.0e-6 * polygon[2] * polygon[2]:
+        # a segment: along its widest direction, about its middle
+        ux = float(1.0)
+        uy = float(0.0)
+        for k in range(m):
+            if wp.sqrt(xs[k] * xs[k] + ys[k] * ys[k]) >= polygon[2] and polygon[2] > 0.0:
+                ux = xs[k] / polygon[2]
+                uy = ys[k] / polygon[2]
+        lo = float(1.0e30)
+        hi = float(-1.0e30)
+        for k in range(m):
+            along = xs[k] * ux + ys[k] * uy
+            lo = wp.min(lo, along)
+            hi = wp.max(hi, along)
+        middle = 0.5 * (lo + hi)
+        cx += middle * ux
+        cy += middle * uy
+        for k in range(m):
+            xs[k] = xs[k] - middle * ux
+            ys[k] = ys[k] - middle * uy
+        r_e = 0.25 * (hi - lo)
+    spread = float(0.0)
+    weight = float(0.0)
+    for k in range(m):
+        spread += ws[k] * wp.sqrt(xs[k] * xs[k] + ys[k] * ys[k])
+        weight += ws[k]
+    patch.centre = origin + cx * t1 + cy * t2
+    patch.points = m
+    patch.weight = weight
+    patch.spread = spread
+    if spread > 0.0:
+        patch.scale = wp.clamp(r_e * weight / spread, 0.0, 1.0)
+    return patch
