@@ -24,7 +24,7 @@ the plane) and a straight slide (the in-plane torques of symmetric points cancel
 only the moment about the normal changes.  The normal rows keep the true points.
 
 The patch is the points that hold a normal impulse, weighted by it (in a cold contact, where none
-holds one yet, the deepest points, equally: patch_weight).  A body's terrain patch is measured
+holds one yet, the deepest points, equally: point_weight).  A body's terrain patch is measured
 along the two axes of the body most nearly in the contact plane (terrain_patch): a face's corners,
 edge midpoints and centre span the rectangle it presses with, an edge a segment (b = 0); on
 curved ground that bounding rectangle is an approximation.  A pair's patch is the polygon of its
@@ -68,98 +68,23 @@ def even_pressure_radius(a: float, b: float) -> float:
             + small * small * small * wp.log((big + d) / small)) / (6.0 * big * small)
 
 
-@wp.struct
-class TwistPatch:
-    """A manifold's patch, built in two passes over its loaded points (patch_extend, then
-    patch_spread) with patch_centre between them, and closed by patch_finish; ``centre`` and
-    ``scale`` are what twist_arm needs."""
-
-    rot: wp.mat33  # the face's body's axes (columns)
-    lo: wp.vec3  # extents of the loaded points along the axes
-    hi: wp.vec3
-    along: wp.vec3  # weighted sums of their coordinates along the axes
-    normal: wp.vec3  # weighted sum of their normals
-    weight: float
-    points: int
-    face: int  # the axis nearest the contact normal
-    cold: int  # no point holds an impulse yet: the deepest ones, equally weighted (patch_weight)
-    cold_floor: float  # the depth a point of a cold patch reaches to count
-    spread: float
-    centre: wp.vec3
-    scale: float
-
-
-@wp.func
-def patch_begin(rot: wp.mat33) -> TwistPatch:
-    """An empty patch on a face of the body turned by ``rot``."""
-    patch = TwistPatch()
-    patch.rot = rot
-    patch.lo = wp.vec3(1.0e30)
-    patch.hi = wp.vec3(-1.0e30)
-    patch.along = wp.vec3(0.0)
-    patch.normal = wp.vec3(0.0)
-    patch.weight = 0.0
-    patch.points = 0
-    patch.face = 0
-    patch.cold = 0
-    patch.cold_floor = 0.0
-    patch.spread = 0.0
-    patch.centre = wp.vec3(0.0)
-    patch.scale = 1.0
-    return patch
-
-
-@wp.func
-def patch_weight(patch: TwistPatch, impulse: float, depth: float) -> float:
-    """A point's weight: the normal impulse it holds; in a cold patch (none holds one yet: a box
-    just landed or set down) 1 for the deepest points (within COLD_BAND of the patch's size: a
-    face set down flat, an edge landing first), so the first sweep's friction acts at the arms
-    later ones use (its impulse is clamped where it was applied, so the corners' torque taken there
-    stays: a plate set down spinning on a box lost 17 % more spin in its first step)."""
-    if patch.cold != 0:
-        return wp.where(depth >= patch.cold_floor, 1.0, 0.0)
-    return impulse
-
-
 @wp.func
 def cold_floor(deepest: float, size: float) -> float:
+    """The depth a point of a cold patch (none holds an impulse yet: a box just landed or set down)
+    must reach to count: within COLD_BAND of the patch's size of the deepest point, so a face set
+    down flat counts whole and an edge landing first counts alone."""
     return deepest - COLD_BAND * size
 
 
 @wp.func
-def patch_extend(patch: TwistPatch, point: wp.vec3, n: wp.vec3, weight: float) -> TwistPatch:
-    """First pass: a loaded point (weight = its normal impulse > 0) widens the extents."""
-    if weight <= 0.0:
-        return patch
-    out = patch
-    local = wp.transpose(patch.rot) * point
-    out.lo = wp.min(patch.lo, local)
-    out.hi = wp.max(patch.hi, local)
-    out.along = patch.along + weight * local
-    out.normal = patch.normal + weight * n
-    out.weight = patch.weight + weight
-    out.points = patch.points + 1
-    return out
-
-
-@wp.func
-def patch_centre(patch: TwistPatch) -> TwistPatch:
-    """Between the passes: the face is the one whose axis lies nearest the mean normal; the centre
-    is the middle of the extents along the other two, at the weighted mean along that axis."""
-    out = patch
-    if patch.points < 2:
-        return out
-    n = wp.transpose(patch.rot) * patch.normal
-    face = int(0)
-    if wp.abs(n[1]) > wp.abs(n[0]) and wp.abs(n[1]) >= wp.abs(n[2]):
-        face = 1
-    elif wp.abs(n[2]) > wp.abs(n[0]) and wp.abs(n[2]) > wp.abs(n[1]):
-        face = 2
-    local = 0.5 * (patch.lo + patch.hi)
-    local[face] = patch.along[face] / patch.weight
-    out.face = face
-    out.centre = patch.rot * local
-    return out
+def point_weight(cold: int, floor: float, impulse: float, depth: float) -> float:
+    """A point's weight in its patch: the normal impulse it holds; in a cold patch 1 for the
+    deepest points (cold_floor), so the first sweep's friction acts at the arms later ones use
+    (its impulse is clamped where it was applied, so the corners' torque taken there stays: a plate
+    set down spinning on a box lost 17 % more spin in its first step)."""
+    if cold != 0:
+        return wp.where(depth >= floor, 1.0, 0.0)
+    return impulse
 
 
 @wp.func
@@ -167,37 +92,7 @@ def in_plane(offset: wp.vec3, n: wp.vec3) -> wp.vec3:
     return offset - wp.dot(offset, n) * n
 
 
-@wp.func
-def patch_spread(patch: TwistPatch, point: wp.vec3, n: wp.vec3, weight: float) -> TwistPatch:
-    """Second pass: the loaded points' weighted radius about the centre, in the contact plane."""
-    if weight <= 0.0 or patch.points < 2:
-        return patch
-    out = patch
-    out.spread = patch.spread + weight * wp.length(in_plane(point - patch.centre, n))
-    return out
-
-
-@wp.func
-def patch_finish(patch: TwistPatch) -> TwistPatch:
-    """s = r_e / D (module docstring), at most 1; 1 where the patch is a single point."""
-    out = patch
-    out.scale = 1.0
-    if patch.points < 2 or patch.spread <= 0.0:
-        return out
-    mean_radius = patch.spread / patch.weight
-    half = 0.5 * (patch.hi - patch.lo)
-    r_e = even_pressure_radius(half[(patch.face + 1) % 3], half[(patch.face + 2) % 3])
-    out.scale = wp.clamp(r_e / mean_radius, 0.0, 1.0)
-    return out
-
-
 NO_TWIST = wp.constant(wp.vec4(0.0, 0.0, 0.0, 1.0))  # a patch of one point: friction at the point itself
-
-
-@wp.func
-def patch_twist(patch: TwistPatch) -> wp.vec4:
-    """What the sweeps keep of a patch: its centre and s (solver_twist, pair_twist)."""
-    return wp.vec4(patch.centre[0], patch.centre[1], patch.centre[2], patch.scale)
 
 
 @wp.func
@@ -208,11 +103,18 @@ def twist_centre(twist: wp.vec4) -> wp.vec3:
 @wp.func
 def twist_arm(arm: wp.vec3, point: wp.vec3, n: wp.vec3, twist: wp.vec4) -> wp.vec3:
     """The arm a friction row acts at: ``arm`` less (1 - s) of the offset of ``point`` (in the
-    frame the patch was measured in) from the patch's centre, taken in the contact plane."""
+    frame the patch was measured in) from the patch's centre, taken in the contact plane; ``twist``
+    is (centre, s) as terrain_patch and pair_patch give it."""
     scale = twist[3]
     if scale >= 1.0:
         return arm
     return arm - (1.0 - scale) * in_plane(point - twist_centre(twist), n)
+
+
+@wp.func
+def terrain_row(first: int, k: int, listed: int, terrain_row_slot: wp.array(dtype=wp.int32)) -> int:
+    """The slot of a body's k-th row: listed (staged.py), or its k-th slot (soft_step.py)."""
+    return wp.where(listed != 0, terrain_row_slot[first + k], first + k)
 
 
 @wp.func
@@ -231,47 +133,73 @@ def terrain_patch(
     terrain_contact_normal: wp.array(dtype=wp.vec3),
     terrain_contact_depth: wp.array(dtype=float),
     terrain_contact_normal_impulse: wp.array(dtype=float),
-) -> TwistPatch:
-    """The patch of a body's terrain contacts, as arms from ``origin``: its rows
+) -> wp.vec4:
+    """(centre as an arm from ``origin``, s) of a body's terrain patch: its rows
     terrain_row_slot[first + k], k < count, where ``listed`` (staged.py), else its active slots
-    first .. first + count (soft_step.py).  Weighted by the impulses they hold now (patch_weight)."""
-    patch = patch_begin(rot)
+    first .. first + count (soft_step.py), weighted by point_weight.  Extents along the body's axes
+    (``rot``'s columns); the face is the one whose axis lies nearest the weighted normal."""
     if count < 2 or friction <= 0.0:
-        return patch
+        return NO_TWIST
+    rot_t = wp.transpose(rot)
+    lo = wp.vec3(1.0e30)
+    hi = wp.vec3(-1.0e30)
+    along = wp.vec3(0.0)
+    normal = wp.vec3(0.0)
+    weight = float(0.0)
+    points = int(0)
+    cold = int(0)
+    floor = float(0.0)
     for attempt in range(2):
-        patch.cold = attempt
+        cold = attempt
         if attempt == 1:
             deepest = float(-1.0e30)
             size = float(0.0)
             for k in range(count):
-                slot = first + k
-                if listed != 0:
-                    slot = terrain_row_slot[first + k]
+                slot = terrain_row(first, k, listed, terrain_row_slot)
                 if listed != 0 or terrain_contact_active[slot] != 0:
                     deepest = wp.max(deepest, terrain_contact_depth[slot])
                     size = wp.max(size, wp.length(terrain_contact_point[slot] - origin))
-            patch.cold_floor = cold_floor(deepest, size)
+            floor = cold_floor(deepest, size)
         for k in range(count):
-            slot = first + k
-            if listed != 0:
-                slot = terrain_row_slot[first + k]
+            slot = terrain_row(first, k, listed, terrain_row_slot)
             if listed != 0 or terrain_contact_active[slot] != 0:
-                patch = patch_extend(patch, terrain_contact_point[slot] - origin, terrain_contact_normal[slot],
-                                     patch_weight(patch, terrain_contact_normal_impulse[slot],
-                                                  terrain_contact_depth[slot]))
-        if patch.points > 0:
+                w = point_weight(cold, floor, terrain_contact_normal_impulse[slot], terrain_contact_depth[slot])
+                if w > 0.0:
+                    local = rot_t * (terrain_contact_point[slot] - origin)
+                    lo = wp.min(lo, local)
+                    hi = wp.max(hi, local)
+                    along = along + w * local
+                    normal = normal + w * terrain_contact_normal[slot]
+                    weight = weight + w
+                    points += 1
+        if points > 0:
             break
-    patch = patch_centre(patch)
-    if patch.points < 2:
-        return patch
+    if points < 2:
+        return NO_TWIST
+    # the face: the axis nearest the mean normal; the centre: the middle of the extents along the
+    # other two, at the weighted mean along that axis
+    n_local = rot_t * normal
+    face = int(0)
+    if wp.abs(n_local[1]) > wp.abs(n_local[0]) and wp.abs(n_local[1]) >= wp.abs(n_local[2]):
+        face = 1
+    elif wp.abs(n_local[2]) > wp.abs(n_local[0]) and wp.abs(n_local[2]) > wp.abs(n_local[1]):
+        face = 2
+    centre_local = 0.5 * (lo + hi)
+    centre_local[face] = along[face] / weight
+    centre = rot * centre_local
+    spread = float(0.0)
     for k in range(count):
-        slot = first + k
-        if listed != 0:
-            slot = terrain_row_slot[first + k]
+        slot = terrain_row(first, k, listed, terrain_row_slot)
         if listed != 0 or terrain_contact_active[slot] != 0:
-            patch = patch_spread(patch, terrain_contact_point[slot] - origin, terrain_contact_normal[slot],
-                                 patch_weight(patch, terrain_contact_normal_impulse[slot], terrain_contact_depth[slot]))
-    return patch_finish(patch)
+            w = point_weight(cold, floor, terrain_contact_normal_impulse[slot], terrain_contact_depth[slot])
+            if w > 0.0:
+                offset = in_plane(terrain_contact_point[slot] - origin - centre, terrain_contact_normal[slot])
+                spread = spread + w * wp.length(offset)
+    if spread <= 0.0:
+        return NO_TWIST
+    half = 0.5 * (hi - lo)
+    r_e = even_pressure_radius(half[(face + 1) % 3], half[(face + 2) % 3])
+    return wp.vec4(centre[0], centre[1], centre[2], wp.clamp(r_e * weight / spread, 0.0, 1.0))
 
 
 @wp.func
@@ -342,15 +270,14 @@ def pair_patch(
     pair_point: wp.array(dtype=wp.vec3),
     pair_depth: wp.array(dtype=float),
     pair_normal_impulse: wp.array(dtype=float),
-) -> TwistPatch:
-    """The patch of pair p's points (at most four, in the world as stored by the last pass or
+) -> wp.vec4:
+    """(centre in the world, s) of the patch of pair p's points (at most four, in the world as stored by the last pass or
     refresh, which may have turned since the bodies' reference poses: so no body's axes) as the
     polygon they span in the contact plane, about their centroid; weighted by the impulses they
-    hold now (patch_weight).  Where they span no area (an edge on a face) it is the segment
+    hold now (point_weight).  Where they span no area (an edge on a face) it is the segment
     between the farthest two: r_e = half its half length."""
-    patch = patch_begin(wp.identity(n=3, dtype=float))
     if count < 2:
-        return patch
+        return NO_TWIST
     n = pair_normal[p]
     t1 = wp.normalize(wp.cross(n, wp.where(wp.abs(n[0]) < 0.9, wp.vec3(1.0, 0.0, 0.0), wp.vec3(0.0, 1.0, 0.0))))
     t2 = wp.cross(n, t1)
@@ -359,18 +286,20 @@ def pair_patch(
     ys = wp.vec4(0.0)
     ws = wp.vec4(0.0)
     m = int(0)
+    cold = int(0)
+    floor = float(0.0)
     for attempt in range(2):
-        patch.cold = attempt
+        cold = attempt
         if attempt == 1:
             deepest = float(-1.0e30)
             size = float(0.0)
             for k in range(count):
                 deepest = wp.max(deepest, pair_depth[p * POINTS + k])
                 size = wp.max(size, wp.length(pair_point[p * POINTS + k] - origin))
-            patch.cold_floor = cold_floor(deepest, size)
+            floor = cold_floor(deepest, size)
         for k in range(count):
             slot = p * POINTS + k
-            weight = patch_weight(patch, pair_normal_impulse[slot], pair_depth[slot])
+            weight = point_weight(cold, floor, pair_normal_impulse[slot], pair_depth[slot])
             if weight > 0.0:
                 offset = pair_point[slot] - origin
                 xs[m] = wp.dot(offset, t1)
@@ -380,7 +309,7 @@ def pair_patch(
         if m > 0:
             break
     if m < 2:
-        return patch
+        return NO_TWIST
     cx = float(0.0)
     cy = float(0.0)
     for k in range(m):
@@ -417,10 +346,7 @@ def pair_patch(
     for k in range(m):
         spread += ws[k] * wp.sqrt(xs[k] * xs[k] + ys[k] * ys[k])
         weight += ws[k]
-    patch.centre = origin + cx * t1 + cy * t2
-    patch.points = m
-    patch.weight = weight
-    patch.spread = spread
-    if spread > 0.0:
-        patch.scale = wp.clamp(r_e * weight / spread, 0.0, 1.0)
-    return patch
+    if spread <= 0.0:
+        return NO_TWIST
+    centre = origin + cx * t1 + cy * t2
+    return wp.vec4(centre[0], centre[1], centre[2], wp.clamp(r_e * weight / spread, 0.0, 1.0))

@@ -15,7 +15,7 @@ features and impulses into the ``prev_*`` arrays once the solve is done.
 
 import warp as wp
 
-from .contact_patch import NO_TWIST, pair_patch, patch_twist
+from .contact_patch import NO_TWIST, pair_patch
 from .primitives import collide_pair, mat43
 
 wp.set_module_options({"enable_backward": False})
@@ -389,7 +389,7 @@ def carry_pair_impulses(
         pair_tangent_impulse[slot] = tangent_impulse
     twist = NO_TWIST
     if measure_patch != 0:
-        twist = patch_twist(pair_patch(p, count, pair_normal, pair_point, pair_depth, pair_normal_impulse))
+        twist = pair_patch(p, count, pair_normal, pair_point, pair_depth, pair_normal_impulse)
     pair_twist[p] = twist
 
 

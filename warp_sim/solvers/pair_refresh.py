@@ -48,7 +48,7 @@ one on the same faces (narrow_phase.match_old_points), so the warm start survive
 import warp as wp
 
 from ..launch import launch
-from ..collide.contact_patch import pair_patch, patch_twist
+from ..collide.contact_patch import pair_patch
 from ..collide.narrow_phase import POINTS, match_old_points
 from ..collide.primitives import SHAPE_SPHERE, collide_pair, mat43
 from .pair_geometry import anchor_weight
@@ -188,8 +188,7 @@ def refresh_turned_pairs(
     pair_refresh_count[p] = pair_refresh_count[p] + 1
     # the new points' patch (collide/contact_patch.py), from the impulses they took over
     if measure_patch != 0:
-        pair_twist[p] = patch_twist(pair_patch(p, m.count, pair_normal, pair_point, pair_depth,
-                                               pair_normal_impulse))
+        pair_twist[p] = pair_patch(p, m.count, pair_normal, pair_point, pair_depth, pair_normal_impulse)
 
 
 def refresh_turned(model, state, solver, pairs, contacts, margin: float, tolerance: float):

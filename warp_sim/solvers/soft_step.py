@@ -41,7 +41,7 @@ import math
 
 import warp as wp
 
-from ..collide.contact_patch import NO_TWIST, patch_twist, terrain_patch, twist_arm
+from ..collide.contact_patch import NO_TWIST, terrain_patch, twist_arm
 from ..column_sag import contact_hertz as contact_frequency
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
@@ -442,10 +442,9 @@ def solve_and_integrate(
     # friction acts at the arms of the patch the carried impulses make (contact_patch.py), for the substep
     twist = NO_TWIST
     if settings.face_patch != 0:
-        twist = patch_twist(terrain_patch(start, count, 0, x, rot, friction, slots.terrain_contact_active,
-                                          slots.terrain_contact_active, slots.terrain_contact_point,
-                                          slots.terrain_contact_normal, slots.terrain_contact_depth,
-                                          slots.terrain_contact_normal_impulse))
+        twist = terrain_patch(start, count, 0, x, rot, friction, slots.terrain_contact_active,
+                              slots.terrain_contact_active, slots.terrain_contact_point, slots.terrain_contact_normal,
+                              slots.terrain_contact_depth, slots.terrain_contact_normal_impulse)
     vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, twist, slots.terrain_contact_active,
                              slots.terrain_contact_point, slots.terrain_contact_normal,
                              slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)

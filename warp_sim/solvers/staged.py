@@ -33,7 +33,7 @@ restitution as max(e_i, e_j) (Box2D's rules).
 
 import warp as wp
 
-from ..collide.contact_patch import NO_TWIST, patch_twist, terrain_patch
+from ..collide.contact_patch import NO_TWIST, terrain_patch
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
@@ -121,11 +121,10 @@ def prepare_body(
                 rows += 1
         solver.terrain_row_count[i] = rows
         if settings.face_patch != 0:
-            twist = patch_twist(terrain_patch(start, rows, 1, x_ref, solver.solver_ref_rot[i],
-                                              model.body_friction[i], solver.terrain_row_slot,
-                                              slots.terrain_contact_active, slots.terrain_contact_point,
-                                              slots.terrain_contact_normal, slots.terrain_contact_depth,
-                                              slots.terrain_contact_normal_impulse))
+            twist = terrain_patch(start, rows, 1, x_ref, solver.solver_ref_rot[i], model.body_friction[i],
+                                  solver.terrain_row_slot, slots.terrain_contact_active, slots.terrain_contact_point,
+                                  slots.terrain_contact_normal, slots.terrain_contact_depth,
+                                  slots.terrain_contact_normal_impulse)
         solver.solver_twist[i] = twist
     elif make_rows != 0:
         twist = solver.solver_twist[i]  # the list of an earlier substep still holds, and its patch
@@ -140,11 +139,10 @@ def prepare_body(
     else:
         solver.terrain_row_count[i] = 0
         if settings.face_patch != 0:
-            twist = patch_twist(terrain_patch(start, count, 0, x_ref, solver.solver_ref_rot[i],
-                                              model.body_friction[i], solver.terrain_row_slot,
-                                              slots.terrain_contact_active, slots.terrain_contact_point,
-                                              slots.terrain_contact_normal, slots.terrain_contact_depth,
-                                              slots.terrain_contact_normal_impulse))
+            twist = terrain_patch(start, count, 0, x_ref, solver.solver_ref_rot[i], model.body_friction[i],
+                                  solver.terrain_row_slot, slots.terrain_contact_active, slots.terrain_contact_point,
+                                  slots.terrain_contact_normal, slots.terrain_contact_depth,
+                                  slots.terrain_contact_normal_impulse)
         solver.solver_twist[i] = twist
         vel = warm_start_terrain(start, count, x_ref, vel, inv_mass, inv_inertia, twist,
                                  slots.terrain_contact_active, slots.terrain_contact_point,
