@@ -25,7 +25,8 @@ def test_full_runs_default_to_results(tmp_path):
     assert common.output_dir(tmp_path, True, "scaling") == tmp_path
 
 
-@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain", "body_order"])
+@pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain", "body_order",
+                                   "face_friction"])
 def test_quick_into_results_is_refused(bench):
     import importlib
 
@@ -64,6 +65,24 @@ def test_thin_rain_quick_writes_rows_and_chart(tmp_path):
                                                          for v in ("defaults", "4 substeps (auto off)")}
     assert all(r["steps_per_s"] > 0 and math.isfinite(r["deepest_m"]) and r["deepest_m"] >= 0 for r in rows)
     assert (tmp_path / "thin_rain.png").stat().st_size > 0
+
+
+def test_face_friction_quick_writes_both_choices_and_the_chart(tmp_path):
+    """The spin-down bench at smoke size: the cube on both floors under both choices, one row a
+    run, the patch at even pressure's rate (1 %, as tests/test_twist_friction.py) and the points
+    faster, and the chart."""
+    import json
+
+    from bench import face_friction
+
+    face_friction.main(["--quick", "--out-dir", str(tmp_path)])
+    rows = json.loads((tmp_path / "face_friction.json").read_text())["rows"]
+    runs = {(r["floor"], r["face_friction"]): r for r in rows}
+    assert set(runs) == {(floor, choice) for floor in ("plane", "static box") for choice in ("patch", "points")}
+    for (floor, choice), row in runs.items():
+        assert row["spin_at_end_rad_s"] < face_friction.SPIN
+        assert (abs(row["ratio"] - 1.0) < 0.01) == (choice == "patch")
+    assert (tmp_path / "face_friction.png").stat().st_size > 0
 
 
 def test_thin_rain_runs_every_setting_on_each_layout(tmp_path):
