@@ -143,9 +143,11 @@ def _strip(obj, drop=("samples",)):
     return obj
 
 
-def machine_line(machine: dict) -> str:
+def machine_line(machine: dict | str) -> str:
     if not machine:
         return "_machine not recorded_"
+    if isinstance(machine, str):  # a result that names its machine in words (gpu_h200_tests.json)
+        return f"Machine: {machine}"
     keys = ["cpu", "cores", "device", "device_name", "warp", "python", "gl_renderer", "runner"]
     parts = [f"{k}: {machine[k]}" for k in keys if k in machine]
     parts += [f"{k}: {fmt(v)}" for k, v in machine.items() if k not in keys and not isinstance(v, (dict, list))]

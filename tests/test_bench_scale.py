@@ -214,3 +214,12 @@ def test_rain_compares_both_contact_update_modes(tmp_path):
             assert is_number(r[key]), (key, r[key])
         assert float(r["peak_penetration_m"]) > 0.0  # bodies landed: some contact was probed
     assert_png(tmp_path / "rain_cpu.png")
+
+
+def test_report_takes_a_result_whose_machine_is_words(tmp_path):
+    """A result file naming its machine in a sentence (the GPU runs' test summary) gets a section
+    like any other instead of stopping the whole report (it raised AttributeError)."""
+    (tmp_path / "gpu_tests.json").write_text(json.dumps({"machine": "one H200, 16 cores", "rows": [{"a": 1}]}))
+    out = tmp_path / "REPORT.md"
+    report.main(["--results-dir", str(tmp_path), "--out", str(out)])
+    assert "Machine: one H200, 16 cores" in out.read_text()
