@@ -17,7 +17,6 @@ drawn).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -26,36 +25,18 @@ sys.path.insert(0, str(ROOT))
 
 from bench import common  # noqa: E402
 
-G = 9.81
 BOXES = {"cube 0.5 m": (0.25, 0.25, 0.25), "plate 0.8 x 0.2 x 0.4 m": (0.4, 0.1, 0.2),
          "bar 1.0 x 0.5 x 0.2 m": (0.5, 0.25, 0.1)}
 MU, SPIN = 0.5, 10.0
 
 
-def even_pressure_rate(a: float, b: float) -> float:
-    """mu g r_e 3 / (a^2 + b^2) [rad/s^2], r_e in closed form (contact_patch.py's formula, here in
-    float64)."""
-    d = math.hypot(a, b)
-    r_e = (2 * a * b * d + a**3 * math.log((b + d) / a) + b**3 * math.log((a + d) / b)) / (6 * a * b)
-    return MU * G * r_e * 3.0 / (a * a + b * b)
-
-
 def spin_down(half, floor: str, choice: str, seconds: float) -> list[float]:
     import warp as wp
 
-    from warp_sim import ModelBuilder, SimConfig, Simulator
-    from warp_sim.builder import Material
-    from warp_sim.terrain import NoTerrain, PlaneTerrain
+    from warp_sim import cases
 
     wp.config.quiet = True
-    b = ModelBuilder(Material(friction=MU))
-    if floor == "plane":
-        b.set_terrain(PlaneTerrain())
-    else:
-        b.set_terrain(NoTerrain())
-        b.add_box((3.0, 0.2, 3.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
-    b.add_box(half, 1.0, position=(0.0, half[1], 0.0), angular_velocity=(0.0, SPIN, 0.0))
-    sim = Simulator(b.finalize("cpu"), SimConfig(sleep=False, face_friction=choice))
+    sim = cases.spinning_box(half, friction=MU, spin=SPIN, floor=floor, face_friction=choice)
     spins = [SPIN]
     for _ in range(int(round(seconds / sim.config.dt))):
         sim.step()
@@ -68,6 +49,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="the cube only, 0.2 s (a smoke run)")
     p.add_argument("--out-dir", type=Path, default=None)
     args = p.parse_args(argv)
+    from warp_sim import cases
+
     out_dir = common.output_dir(args.out_dir, args.quick, "face_friction")
     seconds = 0.2 if args.quick else 0.5
     boxes = {k: BOXES[k] for k in list(BOXES)[:1]} if args.quick else BOXES
@@ -77,7 +60,7 @@ def main(argv=None) -> int:
             for choice in ("patch", "points"):
                 spins = spin_down(half, floor, choice, seconds)
                 runs.append((name, floor, choice, spins))
-                rate = even_pressure_rate(half[0], half[2])
+                rate = cases.spin_down_rate(half, MU)
                 # from 2 steps on (the soft contact takes the load first), over 0.1 s
                 slowed = (spins[2] - spins[8]) / 0.1
                 rows.append({"box": name, "floor": floor, "face_friction": choice,
@@ -94,7 +77,7 @@ def main(argv=None) -> int:
 
     fig, axes = plt.subplots(1, len(boxes), figsize=(4.2 * len(boxes), 3.6), squeeze=False)
     for ax, (name, half) in zip(axes[0], boxes.items()):
-        rate = even_pressure_rate(half[0], half[2])
+        rate = cases.spin_down_rate(half, MU)
         t = [k / 60.0 for k in range(int(round(seconds * 60)) + 1)]
         ax.plot(t, [max(SPIN - rate * x, 0.0) for x in t], color="k", lw=2.5, alpha=0.35,
                 label="even pressure (Coulomb over the face)")

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_sim import ModelBuilder, SimConfig, Simulator
+from warp_sim import ModelBuilder, SimConfig, Simulator, cases
 from warp_sim.builder import Material
 from warp_sim.collide import contact_patch as twist
-from warp_sim.terrain import NoTerrain, PlaneTerrain
+from warp_sim.terrain import PlaneTerrain
 
 G = 9.81
 
@@ -98,15 +98,8 @@ def test_polygon_mean_radius_matches_sampling(shape):
     assert got_area == pytest.approx(area, rel=1e-5)
 
 
-def spinning_box(half, mass, mu, spin, floor, device, velocity=(0.0, 0.0, 0.0)):
-    b = ModelBuilder(Material(friction=mu))
-    if floor == "plane":
-        b.set_terrain(PlaneTerrain())
-    else:
-        b.set_terrain(NoTerrain())
-        b.add_box((3.0, 0.2, 3.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
-    b.add_box(half, mass, position=(0.0, half[1], 0.0), velocity=velocity, angular_velocity=(0.0, spin, 0.0))
-    return Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
+def spinning_box(half, mass, mu, spin, floor, device, velocity=(0.0, 0.0, 0.0), **config):
+    return cases.spinning_box(half, mass, mu, spin, floor, velocity, device, **config)
 
 
 @pytest.mark.parametrize("floor", ["plane", "static box"])
@@ -134,6 +127,7 @@ def test_a_box_spinning_on_a_face_slows_as_even_pressure_says(floor, half, mass,
     slowed = (before - float(sim.angular_velocity()[-1, 1])) / 0.1
     r_e = mean_radius_numpy(np.array([[-a, -b], [a, -b], [a, b], [-a, b]]))
     expected = mu * G * r_e * 3.0 / (a * a + b * b)
+    assert cases.spin_down_rate(half, mu) == pytest.approx(expected, rel=1e-6)  # the bench's line
     assert slowed == pytest.approx(expected, rel=0.01)
 
 
@@ -191,14 +185,7 @@ def test_face_friction_at_points_turns_a_face_at_its_corners(floor, device):
     the patch): a cube spinning on its face slows sqrt(2) / (r_e / a) = 1.848 times as fast as even
     pressure says, the corners' arm (1 %, as above).  Shown, so the choice's cost is on record."""
     a, mu, spin = 0.25, 0.5, 10.0
-    b = ModelBuilder(Material(friction=mu))
-    if floor == "plane":
-        b.set_terrain(PlaneTerrain())
-    else:
-        b.set_terrain(NoTerrain())
-        b.add_box((3.0, 0.2, 3.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
-    b.add_box((a, a, a), 1.0, position=(0.0, a, 0.0), angular_velocity=(0.0, spin, 0.0))
-    sim = Simulator(b.finalize(device), SimConfig(sleep=False, face_friction="points", device=device))
+    sim = spinning_box((a, a, a), 1.0, mu, spin, floor, device, face_friction="points")
     sim.step(2)
     before = float(sim.angular_velocity()[-1, 1])
     sim.step(6)

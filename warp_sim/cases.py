@@ -153,6 +153,31 @@ def sliding_acceleration(angle_deg: float, friction: float) -> float:
     return max(GRAVITY * (math.sin(a) - friction * math.cos(a)), 0.0)
 
 
+def spinning_box(half, mass=1.0, friction=0.5, spin=10.0, floor="plane", velocity=(0.0, 0.0, 0.0), device="cpu",
+                 **config) -> Simulator:
+    """A box (half extents ``half``) set down on its x-z face, spinning about the vertical at
+    ``spin`` (and sliding at ``velocity``), on the plane or on a wide static box
+    (collide/contact_patch.py): the spin falls at mu g r_e(a, b) 3 / (a^2 + b^2) while it slides
+    in place (spin_down_rate)."""
+    b = ModelBuilder(Material(friction=friction))
+    if floor == "plane":
+        b.set_terrain(PlaneTerrain())
+    else:
+        b.set_terrain(NoTerrain())
+        b.add_box((3.0, 0.2, 3.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
+    b.add_box(half, mass, position=(0.0, half[1], 0.0), velocity=velocity, angular_velocity=(0.0, spin, 0.0))
+    return _sim(b, device, **config)
+
+
+def spin_down_rate(half, friction: float) -> float:
+    """mu g r_e 3 / (a^2 + b^2) [rad/s^2] for spinning_box, r_e the mean distance over the a x b
+    face from its centre in closed form (float64; contact_patch.py derives it)."""
+    a, b = half[0], half[2]
+    d = math.hypot(a, b)
+    r_e = (2 * a * b * d + a**3 * math.log((b + d) / a) + b**3 * math.log((a + d) / b)) / (6 * a * b)
+    return friction * GRAVITY * r_e * 3.0 / (a * a + b * b)
+
+
 DEFAULT_TERRAIN = FourierTerrain()
 
 
