@@ -156,16 +156,24 @@ def sliding_acceleration(angle_deg: float, friction: float) -> float:
 def spinning_box(half, mass=1.0, friction=0.5, spin=10.0, floor="plane", velocity=(0.0, 0.0, 0.0), device="cpu",
                  **config) -> Simulator:
     """A box (half extents ``half``) set down on its x-z face, spinning about the vertical at
-    ``spin`` (and sliding at ``velocity``), on the plane or on a wide static box
-    (collide/contact_patch.py): the spin falls at mu g r_e(a, b) 3 / (a^2 + b^2) while it slides
-    in place (spin_down_rate)."""
+    ``spin`` (and sliding at ``velocity``), on the plane, a wide static box or a free slab lying on
+    the plane (collide/contact_patch.py): the spin falls at mu g r_e(a, b) 3 / (a^2 + b^2) while it
+    slides in place (spin_down_rate)."""
     b = ModelBuilder(Material(friction=friction))
+    base = 0.0
     if floor == "plane":
         b.set_terrain(PlaneTerrain())
-    else:
+    elif floor == "static box":
         b.set_terrain(NoTerrain())
         b.add_box((3.0, 0.2, 3.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
-    b.add_box(half, mass, position=(0.0, half[1], 0.0), velocity=velocity, angular_velocity=(0.0, spin, 0.0))
+    elif floor == "box on the plane":
+        # a free 20 kg slab on the plane: its ground friction holds the top box's torque many times
+        b.set_terrain(PlaneTerrain())
+        b.add_box((0.8, 0.2, 0.8), 20.0, position=(0.0, 0.2, 0.0))
+        base = 0.4
+    else:
+        raise ValueError(f"floor must be 'plane', 'static box' or 'box on the plane', got {floor!r}")
+    b.add_box(half, mass, position=(0.0, base + half[1], 0.0), velocity=velocity, angular_velocity=(0.0, spin, 0.0))
     return _sim(b, device, **config)
 
 
