@@ -53,6 +53,34 @@ MAKE_ROWS = 1
 MAKE_ROWS_ALWAYS = 2
 
 
+@wp.func
+def body_twist(
+    i: int,
+    first: int,
+    count: int,
+    listed: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+) -> wp.vec4:
+    """Body i's terrain patch (collide/contact_patch.terrain_patch, over its listed rows or its
+    active slots), kept in solver_twist for the sweeps; friction at the points themselves under
+    ``face_friction = "points"``."""
+    twist = NO_TWIST
+    if settings.face_patch != 0:
+        twist = terrain_patch(first, count, listed, solver.solver_ref_pos[i], solver.solver_ref_rot[i],
+                              model.body_friction[i], solver.terrain_row_slot, slots.terrain_contact_active,
+                              slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                              slots.terrain_contact_normal_impulse)
+    solver.solver_twist[i] = twist
+    return twist
+
+
 @wp.func(inline=True)
 def prepare_body(
     i: int,
@@ -120,12 +148,7 @@ def prepare_body(
                 solver.terrain_row_slot[start + rows] = slot
                 rows += 1
         solver.terrain_row_count[i] = rows
-        if settings.face_patch != 0:
-            twist = terrain_patch(start, rows, 1, x_ref, solver.solver_ref_rot[i], model.body_friction[i],
-                                  solver.terrain_row_slot, slots.terrain_contact_active, slots.terrain_contact_point,
-                                  slots.terrain_contact_normal, slots.terrain_contact_depth,
-                                  slots.terrain_contact_normal_impulse)
-        solver.solver_twist[i] = twist
+        twist = body_twist(i, start, rows, 1, model, settings, slots, solver)
     elif make_rows != 0:
         twist = solver.solver_twist[i]  # the list of an earlier substep still holds, and its patch
     if make_rows != 0:
@@ -138,12 +161,7 @@ def prepare_body(
                                         inv_inertia)
     else:
         solver.terrain_row_count[i] = 0
-        if settings.face_patch != 0:
-            twist = terrain_patch(start, count, 0, x_ref, solver.solver_ref_rot[i], model.body_friction[i],
-                                  solver.terrain_row_slot, slots.terrain_contact_active, slots.terrain_contact_point,
-                                  slots.terrain_contact_normal, slots.terrain_contact_depth,
-                                  slots.terrain_contact_normal_impulse)
-        solver.solver_twist[i] = twist
+        twist = body_twist(i, start, count, 0, model, settings, slots, solver)
         vel = warm_start_terrain(start, count, x_ref, vel, inv_mass, inv_inertia, twist,
                                  slots.terrain_contact_active, slots.terrain_contact_point,
                                  slots.terrain_contact_normal, slots.terrain_contact_normal_impulse,
