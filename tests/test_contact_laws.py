@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from warp_sim import ModelBuilder, SimConfig, Simulator
+from warp_sim import ModelBuilder, SimConfig, Simulator, cases
 from warp_sim.builder import Material
 from warp_sim.column_sag import contact_omega
 from warp_sim.terrain import FourierTerrain, NoTerrain, PlaneTerrain
@@ -471,14 +471,7 @@ def test_a_cube_spinning_on_its_face_slows_as_even_pressure_says(floor, mu, spin
     first substep's soft-contact transient.  With friction at the corners (before contact_patch.py) it
     slowed 1.85 times as fast."""
     a, m = 0.25, 1.0
-    b = ModelBuilder(Material(friction=mu))
-    if floor == "plane":
-        b.set_terrain(PlaneTerrain())
-    else:
-        b.set_terrain(NoTerrain())
-        b.add_box((2.0, 0.2, 2.0), 1.0, position=(0.0, -0.2, 0.0), static=True)
-    b.add_box((a, a, a), m, position=(0.0, a, 0.0), angular_velocity=(0.0, spin, 0.0))
-    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
+    sim = cases.spinning_box((a, a, a), m, mu, spin, floor, device=device)
     sim.step(6)
     slowed = (spin - sim.angular_velocity()[-1, 1]) / 0.1
     even = mu * m * G * a * (math.sqrt(2.0) + math.log(1.0 + math.sqrt(2.0))) / 3.0 / (2.0 * m * a * a / 3.0)

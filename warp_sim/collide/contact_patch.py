@@ -44,9 +44,10 @@ for their friction.
 
 import warp as wp
 
+from .manifold import POINTS
+
 wp.set_module_options({"enable_backward": False})
 
-POINTS = 4  # a pair's point slots (collide/narrow_phase.py)
 # a cold patch's points count within this share of its size of the deepest one (tilts under 1e-3 rad
 # are flat)
 COLD_BAND = 1.0e-3

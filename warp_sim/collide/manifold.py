@@ -28,7 +28,8 @@ stacked at x = 1000 m get the same depths and normals as at the origin.
 import warp as wp
 
 
-mat43 = wp.types.matrix(shape=(4, 3), dtype=float)
+POINTS = 4  # a manifold's point slots: the rows of mat43, a pair's slots in Contacts
+mat43 = wp.types.matrix(shape=(POINTS, 3), dtype=float)
 mat83 = wp.types.matrix(shape=(8, 3), dtype=float)
 vec8i = wp.types.vector(length=8, dtype=wp.int32)
 

@@ -16,11 +16,10 @@ features and impulses into the ``prev_*`` arrays once the solve is done.
 import warp as wp
 
 from .contact_patch import NO_TWIST, pair_patch
+from .manifold import POINTS
 from .primitives import collide_pair, mat43
 
 wp.set_module_options({"enable_backward": False})
-
-POINTS = 4
 
 
 @wp.kernel
