@@ -91,16 +91,15 @@ import warp as wp
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..integrate import pre_kick_fraction, world_inv_inertia
 from ..types import ROTATION_MATRIX
-from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, free_fall_share, gravity_kick,
-                           spheres_miss, spheres_touch_time, time_to_contact)
-from .impact_terrain import (IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED,
-                             impact_terrain)
-from .pair_geometry import NO_CONTACT, pair_point_now, read_pair_velocity
+from .impact_pair import (POINTS, compress_pair, pair_engagement, pair_impact_friction, pair_kick,
+                          pair_manifold_at, restitute_pair)
+from .impact_point import engage_speed, engaged, free_fall_share, spheres_miss, time_to_contact
+from .impact_terrain import impact_terrain
+from .pair_geometry import pair_point_now, read_pair_velocity
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
 
-POINTS = 4
 # Rounds of sweeps over all manifolds of a substep, and sweeps a round (alternating direction).
 # 4 x 1 carry straight chains in either order; a plate struck onto a column of four needs more
 # (module docstring): at 4 x 4 the deepest pair of the audit's plate rain fell from 28.9 to 22.9 mm
@@ -111,10 +110,6 @@ IMPACT_INNER = 4
 # pair test cannot name (the terrain, split overflow pairs)
 NO_EVENT = -1
 OTHER_EVENT = -2
-# A sphere-box impact's time is refined on the contact found again at it (impact_pair_velocity), at
-# most this many times, until the gap there is under TOI_GAP_TOLERANCE [m]
-SPHERE_BOX_REFINES = 3
-TOI_GAP_TOLERANCE = 1.0e-5
 
 
 @wp.func
@@ -160,11 +155,6 @@ def impact_begin_body(
     after_kick = (1.0 - pre_kick_fraction(settings.integrator)) * settings.h
     solver.solver_v[i] = state_in.body_vel[i] - after_kick * settings.gravity
     solver.solver_w[i] = inv_inertia * state_in.body_angmom[i]
-
-
-@wp.func
-def row3(m: wp.mat44, k: int) -> wp.vec3:
-    return wp.vec3(m[k, 0], m[k, 1], m[k, 2])
 
 
 @wp.func
@@ -271,27 +261,10 @@ def impact_pair_velocity(
     j = ij[1]
     e = wp.max(model.body_restitution[i], model.body_restitution[j])
     count = pairs.pair_point_count[p]
-    xi = solver.solver_ref_pos[i]
-    xj = solver.solver_ref_pos[j]
-    dpi = solver.solver_drift_p[i]
-    dpj = solver.solver_drift_p[j]
-    dri = solver.solver_drift_r[i]
-    drj = solver.solver_drift_r[j]
-    radius_i = model.body_sphere_radius[i]
-    radius_j = model.body_sphere_radius[j]
     # the shifts of impacts taken earlier in the substep are motion the bodies make too (v- until
     # their t*): a box bounced off one corner late in the substep keeps closing on the rest
-    dpi = dpi + solver.solver_toi_shift[i]
-    dpj = dpj + solver.solver_toi_shift[j]
-    acc = wp.vec4(NOT_ENGAGED)
-    hit = int(0)
-    bounces = int(0)
-    # the relative speed the substep's gravity adds: to dynamic bodies, less what their contacts hold
-    fall_i = free_fall_share(inv_mi, solver.solver_support[i])
-    fall_j = free_fall_share(inv_mj, solver.solver_support[j])
-    kick = gravity_kick(fall_i, fall_j, settings.gravity, settings.h)
-    turns_i = wp.where(radius_i > 0.0, 0.0, 1.0)  # a sphere's anchor does not turn (soft_step.drift_rotation)
-    turns_j = wp.where(radius_j > 0.0, 0.0, 1.0)
+    dpi = solver.solver_drift_p[i] + solver.solver_toi_shift[i]
+    dpj = solver.solver_drift_p[j] + solver.solver_toi_shift[j]
     # A pair whose impact was its bodies' last event is looked at from that impact, t0, on: the
     # start pose plus the shifts is where v+ would have carried the bodies from the substep's
     # start, which they never were, and there the gap of two balls along that pose's line of
@@ -303,155 +276,47 @@ def impact_pair_velocity(
     # plus the shifts, exact along a fixed normal whatever the order (a box pair's normal is its
     # pass's; looked at from t0 on, the plate rain's deepest layout went from 4.5 to 11.1 mm).
     t0 = float(0.0)
-    if radius_i > 0.0 or radius_j > 0.0:
+    if model.body_sphere_radius[i] > 0.0 or model.body_sphere_radius[j] > 0.0:
         t0 = pair_event_start(i, j, solver)
-    left = settings.h - t0
-    dpi0 = dpi + t0 * vi
-    dpj0 = dpj + t0 * vj
-    dri0 = drift_turned(dri, wi, t0, turns_i)
-    drj0 = drift_turned(drj, wj, t0, turns_j)
-    toi_left = left
-    for k in range(count):
-        # (where the point sits follows the bodies' own masses, split or not)
-        now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                             pairs.pair_feature[p * POINTS + k], xi, xj, dpi0, dpj0, dri0, drj0, solver.solver_ref_rot,
-                             i, j, model)
-        vn = wp.dot(vi + wp.cross(wi, now.arm_i) - vj - wp.cross(wj, now.arm_j), now.normal)
-        # engaged on the speed the substep's kick leaves, as impact_terrain's points
-        if engaged(now.separation, vn + wp.dot(kick, now.normal), left):
-            acc[k] = 0.0
-            toi_left = time_to_contact(now.separation, vn, toi_left)
-            if vn < -engage_speed(settings.gravity, settings.h):
-                hit = 1
-            if vn < -settings.restitution_threshold:
-                bounces = 1
-    if hit == 0:
+    engagement = pair_engagement(p, model, settings, pairs, solver, vi, wi, vj, wj, inv_mi, inv_mj, dpi, dpj, t0)
+    if engagement.hit == 0:
         return out
-    if bounces == 0:
+    if engagement.bounces == 0:
         e = 0.0
-    if radius_i > 0.0 and radius_j > 0.0:
-        # two balls: the line of centres' gap closes for one flying past the other too
-        if spheres_miss(xi + dpi0 - xj - dpj0, vi - vj, radius_i + radius_j, left, left * wp.length(kick)):
-            return out
-        toi_left = spheres_touch_time(xi + dpi0 - xj - dpj0, vi - vj, radius_i + radius_j, left, toi_left)
-    toi = wp.min(t0 + toi_left, settings.h)  # rounding may not carry it past the substep
-    # the impulse acts where the bodies touch, at t*: the points' geometry there (rows k of normal,
-    # arm_i, arm_j), the bodies moved on by t* v and turned by t* w.  Taken at the substep's start
-    # instead, two balls still up to h |v| apart met along the wrong line (a billiard cut shot at
-    # 3 m/s sent the object ball 7.6 degrees off the line of centres) and a ball rolling into a
-    # step's edge was pushed along the edge-to-centre line of before it touched (14 % of its speed
-    # lost, e = 0, mu = 0).  Every body's centre is then shifted to the piecewise motion (v- until
-    # t*, v+ after), moving bodies too: the impulse, at one point of both at t*, keeps linear and
-    # angular momentum about that point (pair_geometry.py), and the shifts carry that to the end
-    # of the substep: L = sum x(t*) x m v+ + spins, as the piecewise motion has it.
-    # A sphere on a box: its contact found again at t* (pair_geometry.sphere_box_point) turns where
-    # it meets an edge, so t* from the substep's start (gap / |v_n| along the normal there) is
-    # refined on the geometry at t*, a few Newton steps on the gap
-    sphere_box = (radius_i > 0.0) != (radius_j > 0.0)
-    for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
-        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS],
-                            pairs.pair_feature[p * POINTS], xi, xj, dpi + toi * vi, dpj + toi * vj,
-                            drift_turned(dri, wi, toi, turns_i), drift_turned(drj, wj, toi, turns_j),
-                            solver.solver_ref_rot, i, j, model)
-        vn_at = wp.dot(vi + wp.cross(wi, at.arm_i) - vj - wp.cross(wj, at.arm_j), at.normal)
-        if at.separation == NO_CONTACT or wp.abs(at.separation) <= TOI_GAP_TOLERANCE or vn_at >= 0.0:
-            break
-        toi = wp.clamp(toi + at.separation / -vn_at, t0, settings.h)
-    dpi_t = dpi + toi * vi
-    dpj_t = dpj + toi * vj
-    dri_t = drift_turned(dri, wi, toi, turns_i)
-    drj_t = drift_turned(drj, wj, toi, turns_j)
-    normal = wp.mat44(0.0)
-    arm_i = wp.mat44(0.0)
-    arm_j = wp.mat44(0.0)
-    for k in range(count):
-        at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
-                            pairs.pair_feature[p * POINTS + k], xi, xj, dpi_t, dpj_t, dri_t, drj_t, solver.solver_ref_rot,
-                            i, j, model)
-        if at.separation == NO_CONTACT:
-            acc[k] = NOT_ENGAGED
-        for axis in range(3):
-            normal[k, axis] = at.normal[axis]
-            arm_i[k, axis] = at.arm_i[axis]
-            arm_j[k, axis] = at.arm_j[axis]
+    toi = engagement.toi
+    # the impulse acts where the bodies touch, at t*: the points' geometry there, the bodies moved
+    # on by t* v and turned by t* w.  Taken at the substep's start instead, two balls still up to
+    # h |v| apart met along the wrong line (a billiard cut shot at 3 m/s sent the object ball 7.6
+    # degrees off the line of centres) and a ball rolling into a step's edge was pushed along the
+    # edge-to-centre line of before it touched (14 % of its speed lost, e = 0, mu = 0).  Every
+    # body's centre is then shifted to the piecewise motion (v- until t*, v+ after), moving bodies
+    # too: the impulse, at one point of both at t*, keeps linear and angular momentum about that
+    # point (pair_geometry.py), and the shifts carry that to the end of the substep:
+    # L = sum x(t*) x m v+ + spins, as the piecewise motion has it.
+    m = pair_manifold_at(p, toi, model, pairs, solver, vi, wi, vj, wj, dpi, dpj, engagement.acc)
     # the impact acts at t*, on the velocities gravity has grown by then: a resting body's contacts
     # hold it (staged.support_share), a falling one has gained g t*
-    gi = (fall_i * toi) * settings.gravity
-    gj = (fall_j * toi) * settings.gravity
-    vi = vi + gi
-    vj = vj + gj
-    vi_in = vi
-    vj_in = vj
-    for _it in range(IMPACT_ITERATIONS):
-        changed = float(0.0)  # as for the terrain: the most normal speed an update changed
-        for k in range(count):
-            if acc[k] >= 0.0:
-                n = row3(normal, k)
-                ri = row3(arm_i, k)
-                rj = row3(arm_j, k)
-                rni = wp.cross(ri, n)
-                rnj = wp.cross(rj, n)
-                k_n = inv_mi + inv_mj + wp.dot(rni, inv_ii * rni) + wp.dot(rnj, inv_ij * rnj)
-                vn = wp.dot(vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj), n)
-                new_acc = wp.max(acc[k] - vn / k_n, 0.0)
-                d = new_acc - acc[k]
-                acc[k] = new_acc
-                vi = vi + (inv_mi * d) * n
-                wi = wi + inv_ii * (rni * d)
-                vj = vj - (inv_mj * d) * n
-                wj = wj - inv_ij * (rnj * d)
-                changed = wp.max(changed, k_n * wp.abs(d))
-        if changed < IMPACT_SPEED_TOLERANCE:
-            break
-    for k in range(count):
-        if acc[k] > 0.0:
-            n = row3(normal, k)
-            bounce = e * acc[k]
-            vi = vi + (inv_mi * bounce) * n
-            wi = wi + inv_ii * (wp.cross(row3(arm_i, k), n) * bounce)
-            vj = vj - (inv_mj * bounce) * n
-            wj = wj - inv_ij * (wp.cross(row3(arm_j, k), n) * bounce)
+    gi = (free_fall_share(inv_mi, solver.solver_support[i]) * toi) * settings.gravity
+    gj = (free_fall_share(inv_mj, solver.solver_support[j]) * toi) * settings.gravity
+    m.vi = vi + gi
+    m.wi = wi
+    m.vj = vj + gj
+    m.wj = wj
+    vi_in = m.vi
+    vj_in = m.vj
+    m = compress_pair(m, count, inv_mi, inv_mj, inv_ii, inv_ij)
+    m = restitute_pair(m, count, e, inv_mi, inv_mj, inv_ii, inv_ij)
     mu = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     if mu > 0.0:
-        tangent = wp.mat44(0.0)  # rows: the accumulated tangential impulse of each point (x, y, z, -)
-        # swept until converged, as for the terrain (impact_terrain says why)
-        for _it in range(IMPACT_ITERATIONS):
-            removed = float(0.0)
-            for k in range(count):
-                if acc[k] > 0.0:
-                    n = row3(normal, k)
-                    ri = row3(arm_i, k)
-                    rj = row3(arm_j, k)
-                    vr = vi + wp.cross(wi, ri) - vj - wp.cross(wj, rj)
-                    vt = vr - wp.dot(vr, n) * n
-                    old_t = row3(tangent, k)
-                    k_t = inv_mi + inv_mj
-                    slip = wp.length(vt)
-                    if slip > 1.0e-9:
-                        c = vt / slip
-                        rti = wp.cross(ri, c)
-                        rtj = wp.cross(rj, c)
-                        k_t = k_t + wp.dot(rti, inv_ii * rti) + wp.dot(rtj, inv_ij * rtj)
-                    new_t = coulomb_step(old_t, vt, k_t, mu * (1.0 + e) * acc[k])
-                    tangent[k, 0] = new_t[0]
-                    tangent[k, 1] = new_t[1]
-                    tangent[k, 2] = new_t[2]
-                    change = new_t - old_t
-                    vi = vi + inv_mi * change
-                    wi = wi + inv_ii * wp.cross(ri, change)
-                    vj = vj - inv_mj * change
-                    wj = wj - inv_ij * wp.cross(rj, change)
-                    removed = wp.max(removed, k_t * wp.length(change))
-            if removed < IMPACT_SLIP_TOLERANCE:
-                break
+        m = pair_impact_friction(m, count, e, mu, inv_mi, inv_mj, inv_ii, inv_ij)
     out.hit = 1
     out.toi = toi
-    out.vi = vi - gi
-    out.wi = wi
-    out.vj = vj - gj
-    out.wj = wj
-    out.shift_i = toi * (vi_in - vi)
-    out.shift_j = toi * (vj_in - vj)
+    out.vi = m.vi - gi
+    out.wi = m.wi
+    out.vj = m.vj - gj
+    out.wj = m.wj
+    out.shift_i = toi * (vi_in - m.vi)
+    out.shift_j = toi * (vj_in - m.vj)
     return out
 
 
@@ -574,8 +439,7 @@ def pair_contact_times(
     j = ij[1]
     vel = read_pair_velocity(solver, i, j)
     toi = settings.h
-    kick = gravity_kick(free_fall_share(model.body_inv_mass[i], solver.solver_support[i]),
-                        free_fall_share(model.body_inv_mass[j], solver.solver_support[j]), settings.gravity, settings.h)
+    kick = pair_kick(i, j, model.body_inv_mass[i], model.body_inv_mass[j], settings, solver)
     for k in range(pairs.pair_point_count[p]):
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
                              pairs.pair_feature[p * POINTS + k], solver.solver_ref_pos[i], solver.solver_ref_pos[j],
