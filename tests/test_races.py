@@ -49,9 +49,11 @@ def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overla
     assert check.isolated.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
     # the neighbour-timer gather and the wake marks use atomics, so they run as one launch, never
     # split (launch.py); the slab schedule colours no pairs
-    kernels = ["collide_terrain", "collide_pairs", "carry_pair_impulses", "store_pairs", "update_sleep", "wake_marked"]
+    kernels = ["collide_terrain", "collide_pairs", "carry_pair_impulses", "store_pairs", "update_sleep", "wake_marked",
+               "terrain_members"]  # and the joint phase of the impacts (solvers/impact_joint.py):
+    kernels.append("pair_joint_pass" if schedule == "colors" else "domain_joint_sweep")
     if schedule == "colors":
-        kernels += ["color_pick", "color_bounds"]
+        kernels += ["color_pick", "color_bounds", "terrain_joint_impact"]
         if top_mass >= 10.0:
             kernels.append("chain_pass")  # the heavy-on-light passes, a launch of their own
     for kernel in kernels:

@@ -257,3 +257,18 @@ def pileup_builder(seed: int, count: int = 12) -> ModelBuilder:
         else:
             b.add_box(tuple(rng.uniform(0.1, 0.4, 3)), orientation=tuple(quats[k]), **args)
     return b
+
+
+def seam_drop(restitution: float, left_first: bool = True, mass_below: float = 1.0, device="cpu", **config):
+    """Zero gravity: a ball (r 0.25, 1 kg, 3 m/s down) meets two touching balls (``mass_below``
+    each) at once, their centres 30 degrees off its line of fall on either side, friction 0: the
+    symmetric simultaneous impact (solvers/impact_joint.py).  ``left_first``: which lower ball is
+    added first (the sequential impacts' pair order).  The bodies are (left, right, striker) or
+    (right, left, striker)."""
+    r = 0.25
+    b = ModelBuilder(Material(restitution=restitution, friction=0.0))
+    b.set_terrain(NoTerrain())
+    for x in ((-r, r) if left_first else (r, -r)):
+        b.add_sphere(r, mass_below, position=(x, 0.0, 0.0))
+    b.add_sphere(r, 1.0, position=(0.0, math.sqrt(3.0) * r + 0.05, 0.0), velocity=(0.0, -3.0, 0.0))
+    return _sim(b, device, sleep=False, gravity=(0.0, 0.0, 0.0), **config)

@@ -30,7 +30,8 @@ class NonFiniteStateError(RuntimeError):
 # The fields SimConfig hands to the solver under the same names (SimConfig.solver_settings).
 SOLVER_FIELDS = ("integrator", "rotation", "iterations", "relax_iterations", "relax_passes", "contact_hertz",
                  "damping_ratio", "max_push_velocity", "restitution_threshold", "convergence_tolerance",
-                 "convergence_gravity_share", "solver", "overflow_pairs", "impacts", "face_friction")
+                 "convergence_gravity_share", "solver", "overflow_pairs", "impacts", "face_friction",
+                 "simultaneous_impacts")
 
 
 @dataclass
@@ -59,6 +60,10 @@ class SimConfig:
     # even pressure over the face does; "points" at the manifold's points (the corners: 1.85 times
     # the torque for a square, and faster)
     face_friction: str = "patch"
+    # manifolds struck at once (solvers/impact_joint.py): "joint" takes those closing at the impact
+    # stage's start as one Poisson impact (symmetric blows give symmetric outcomes); "sequential" one
+    # after another in pair order, the first taking the whole blow, without the joint phase's sweeps
+    simultaneous_impacts: str = "joint"
     convergence_tolerance: float = 1.0e-5
     convergence_gravity_share: float = CONVERGENCE_GRAVITY_SHARE  # passes also stop below this share of |g| h
     solver: str = "soft_step"

@@ -35,6 +35,7 @@ PAIR_SCHEDULES = ("auto", "domains", "colors")
 OVERFLOW_PAIRS = ("auto", "split", "in_order")
 IMPACT_STAGES = ("auto", "always")
 FACE_FRICTIONS = ("patch", "points")  # collide/contact_patch.py
+SIMULTANEOUS_IMPACTS = ("sequential", "joint")  # solvers/impact_joint.py
 BODY_ORDERS = ("scene", "morton", "shape_morton")  # body_order.py
 
 
@@ -406,6 +407,7 @@ SIM_SCHEMA = {
     "restitution_threshold": Number(ge=0),
     "impacts": Choice(IMPACT_STAGES),
     "face_friction": Choice(FACE_FRICTIONS),
+    "simultaneous_impacts": Choice(SIMULTANEOUS_IMPACTS),
     "convergence_tolerance": Number(ge=0),
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),

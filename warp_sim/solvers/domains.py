@@ -36,10 +36,11 @@ import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import IMPACT_INNER, impact_terrain_body
-from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
-                         pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
+from .impact_joint import joint_phase_pair, terrain_impact_in_phase
+from .pair_solve import (MODE_IMPACT, MODE_IMPACT_JOINT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START,
+                         chain_pair, pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
                          warm_start_pair_side)
-from .solver_args import DomainSlabs, SolverBodies, StepSettings
+from .solver_args import DomainSlabs, JointImpacts, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
@@ -60,15 +61,12 @@ def impact_sweep_number(impact_round: int, boundary: int, u: int) -> int:
 
 
 @wp.func
-def impact_sweep_since(impact_round: int, boundary: int, u: int) -> int:
+def impact_sweep_since(impact_round: int, boundary: int, u: int, first_since: int) -> int:
     """The sweep in which the same launch kind last took its manifolds (impact.unchanged_since):
-    the one before within a launch, else the last of the previous round's launch; -1 in the
-    substep's first launch, which takes every manifold."""
+    the one before within a launch; for a launch's first, ``first_since`` (plan.impact_first_since)."""
     if u > 0:
         return impact_sweep_number(impact_round, boundary, u - 1)
-    if impact_round == 0:
-        return -1
-    return impact_sweep_number(impact_round - 1, boundary, IMPACT_INNER - 1)
+    return first_since
 
 
 @wp.func(inline=True)
@@ -113,6 +111,7 @@ def domain_sweep(
     integrate: int,
     finalize: int,
     impact_round: int,
+    impact_since: int,
     has_mass_ratio: int,
     # In
     slabs: DomainSlabs,
@@ -163,7 +162,7 @@ def domain_sweep(
         inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
         for u in range(inner):
             sweep = impact_sweep_number(impact_round, 1, u)
-            since = impact_sweep_since(impact_round, 1, u)
+            since = impact_sweep_since(impact_round, 1, u, impact_since)
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
             for q in range(pair_count):
                 p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
@@ -205,7 +204,7 @@ def domain_sweep(
     inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
     for u in range(inner):
         sweep = impact_sweep_number(impact_round, 0, u)
-        since = impact_sweep_since(impact_round, 0, u)
+        since = impact_sweep_since(impact_round, 0, u, impact_since)
         direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
         for part in range(2):
             if (part == 0) == (direction == 0):
@@ -230,3 +229,51 @@ def domain_sweep(
                 integrate_body(i, model, settings, state_in, solver, state_out)
             if finalize != 0:
                 finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
+
+
+@wp.kernel
+def domain_joint_sweep(
+    tid_offset: int,
+    first_domain: int,
+    domain_count: int,
+    mode: int,
+    reverse: int,
+    impact_round: int,
+    impact_since: int,
+    # In
+    slabs: DomainSlabs,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+):
+    """A round of the joint phase's sweeps (impact_joint.py, ``mode`` MODE_IMPACT_JOINT or its
+    bounce) walked as domain_sweep walks its impact sweeps: a slab's bodies' terrain manifolds, then
+    its pairs; the boundary pairs when d == domain_count.  A kernel of its own: the joint visits
+    compiled into domain_sweep slowed its other modes (its sequential impact sweeps by half)."""
+    d = first_domain + wp.tid() + tid_offset
+    boundary = wp.where(d == domain_count, 1, 0)
+    pair_first = slabs.domain_pair_start[d]
+    pair_count = slabs.domain_pair_start[d + 1] - pair_first
+    body_first = slabs.domain_body_start[d]
+    body_count = wp.where(boundary == 1, 0, slabs.domain_body_start[d + 1] - body_first)
+    inner = wp.where(mode == MODE_IMPACT_JOINT, IMPACT_INNER, 1)
+    for u in range(inner):
+        sweep = impact_sweep_number(impact_round, boundary, u)
+        since = impact_sweep_since(impact_round, boundary, u, impact_since)
+        direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
+        for part in range(2):
+            if (part == 0) == (direction == 0):
+                for k in range(body_count):
+                    terrain_impact_in_phase(slabs.domain_body[walk(body_first, body_count, k, direction)], mode,
+                                            model, settings, slots, solver, joint, sweep, since)
+            else:
+                for k in range(pair_count):
+                    joint_phase_pair(slabs.domain_pair[walk(pair_first, pair_count, k, direction)], mode, model,
+                                     settings, pairs, solver, joint, sweep, since)

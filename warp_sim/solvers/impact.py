@@ -29,9 +29,10 @@ on the whole normal impulse: |P_t| <= mu (1 + e) P_c per point, against the slip
 normal impulses (a sphere hitting a plane at (3, -5) m/s with e = 0.5, mu = 0.1 leaves at
 v_x = 3 - 0.1 * 1.5 * 5 = 2.25).
 
-Between manifolds the impacts propagate in sequence: IMPACT_SWEEPS rounds of IMPACT_INNER
-Gauss-Seidel sweeps over all manifolds, alternating direction, each manifold re-tested on the
-current velocities.  A row of touching balls struck at one end is then a chain of two-body
+Manifolds closing together at the stage's start and sharing a body are first taken as one
+impact (impact_joint.py).  Between manifolds the impacts then propagate in sequence:
+IMPACT_SWEEPS rounds of IMPACT_INNER Gauss-Seidel sweeps over all manifolds, alternating
+direction, each manifold re-tested on the current velocities.  A row of touching balls struck at one end is then a chain of two-body
 impacts: with e = 1 the last ball leaves with the striker's velocity and the others stop
 (Newton's cradle), momentum exactly and kinetic energy to rounding kept; two sweeps in opposite
 directions carry a straight chain in either body order.
@@ -96,7 +97,7 @@ from .impact_pair import (POINTS, compress_pair, pair_engagement, pair_impact_fr
 from .impact_point import engage_speed, engaged, free_fall_share, spheres_miss, time_to_contact
 from .impact_terrain import impact_terrain
 from .pair_geometry import pair_point_now, read_pair_velocity
-from .solver_args import SolverBodies, StepSettings
+from .solver_args import JointImpacts, SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
 
@@ -110,6 +111,10 @@ IMPACT_INNER = 4
 # pair test cannot name (the terrain, split overflow pairs)
 NO_EVENT = -1
 OTHER_EVENT = -2
+# A manifold's part in the stage's simultaneous impact (impact_joint.py), as (t*, e): none, or
+# closing at the stage's start (its t* and e found by the joint phase's first sweep)
+NOT_MEMBER = wp.constant(wp.vec2(-1.0, 0.0))
+CLOSING = wp.constant(wp.vec2(-2.0, 0.0))
 
 
 @wp.func
@@ -133,13 +138,18 @@ def impact_begin_body(
     state_in: BodyState,
     # Solver out
     solver: SolverBodies,
+    joint_phase: int,
+    joint: JointImpacts,
 ):
     """The velocities the impacts act on: those the last solve left, without this substep's
-    gravity (prepare_body adds it back, and the contact solve then holds it as a load)."""
+    gravity (prepare_body adds it back, and the contact solve then holds it as a load); with
+    ``joint_phase``, kept as the start velocities too (impact_joint.py)."""
     solver.solver_toi_shift[i] = wp.vec3(0.0)
     solver.solver_impact_stamp[i] = -1
     solver.solver_pair_toi[i] = settings.h
     solver.solver_event_partner[i] = NO_EVENT
+    if joint_phase != 0:
+        joint.impact_member_count[i] = 0
     if reset_reference != 0:
         solver.solver_ref_pos[i] = state_in.body_pos[i]
         solver.solver_ref_rot[i] = state_in.body_rot[i]
@@ -148,13 +158,22 @@ def impact_begin_body(
     if model.body_inv_mass[i] == 0.0:
         solver.solver_v[i] = wp.vec3(0.0)
         solver.solver_w[i] = wp.vec3(0.0)
+        if joint_phase != 0:
+            joint.impact_v_start[i] = wp.vec3(0.0)
+            joint.impact_w_start[i] = wp.vec3(0.0)
         solver.solver_inv_inertia[i] = wp.mat33(0.0)
         return
     inv_inertia = body_inv_inertia_world(state_in.body_rot[i], model.body_inv_inertia[i], settings.rotation)
     solver.solver_inv_inertia[i] = inv_inertia
     after_kick = (1.0 - pre_kick_fraction(settings.integrator)) * settings.h
-    solver.solver_v[i] = state_in.body_vel[i] - after_kick * settings.gravity
-    solver.solver_w[i] = inv_inertia * state_in.body_angmom[i]
+    v = state_in.body_vel[i] - after_kick * settings.gravity
+    w = inv_inertia * state_in.body_angmom[i]
+    solver.solver_v[i] = v
+    solver.solver_w[i] = w
+    if joint_phase != 0:
+        # kept through the stage: simultaneous impacts are told and placed on them (impact_joint.py)
+        joint.impact_v_start[i] = v
+        joint.impact_w_start[i] = w
 
 
 @wp.func
@@ -382,9 +401,11 @@ def impact_begin(
     state_in: BodyState,
     # Solver out
     solver: SolverBodies,
+    joint_phase: int,
+    joint: JointImpacts,
 ):
     # a twin of impact_begin_body (domain_sweep calls it too): the colour schedule launches it per body
-    impact_begin_body(wp.tid() + tid_offset, model, settings, reset_reference, state_in, solver)
+    impact_begin_body(wp.tid() + tid_offset, model, settings, reset_reference, state_in, solver, joint_phase, joint)
 
 
 @wp.kernel
@@ -418,6 +439,8 @@ def pair_contact_times(
     pairs: PairContacts,
     # Solver in/out
     solver: SolverBodies,
+    joint_phase: int,
+    joint: JointImpacts,
 ):
     """Each body's earliest pair event of the substep (solver_pair_toi, reset to h by the impact
     begin): when a point of one of its pairs, closing faster than the engage speed, touches.
@@ -458,3 +481,13 @@ def pair_contact_times(
     if toi < settings.h:
         wp.atomic_min(solver.solver_pair_toi, i, toi)
         wp.atomic_min(solver.solver_pair_toi, j, toi)
+        # a member of the stage's simultaneous impact, counted on its dynamic bodies (impact_joint.py;
+        # a static body couples nothing); the count is an integer sum, the same in any thread order
+        if joint_phase != 0:
+            joint.impact_pair_event[p] = CLOSING
+            if model.body_inv_mass[i] > 0.0:
+                wp.atomic_add(joint.impact_member_count, i, 1)
+            if model.body_inv_mass[j] > 0.0:
+                wp.atomic_add(joint.impact_member_count, j, 1)
+    elif joint_phase != 0:
+        joint.impact_pair_event[p] = NOT_MEMBER

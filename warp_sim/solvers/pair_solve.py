@@ -12,6 +12,7 @@ from ..collide.contact_patch import NO_TWIST, twist_arm
 from ..kernel_args import BodyModel, BodyState, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import impact_pair, pair_event_start
+from .impact_joint import IMPACT_BOUNCE, IMPACT_JOINT, IMPACT_SEQUENTIAL
 from .impact_point import spheres_miss
 from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
 from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
@@ -25,7 +26,10 @@ POINTS = 4
 MODE_WARM_START = 0
 MODE_SOLVE = 1
 MODE_RELAX = 2
-MODE_IMPACT = 3  # impact.py: restitution and impact friction, before the warm start
+MODE_IMPACT = IMPACT_SEQUENTIAL  # impact.py: restitution and impact friction, before the warm start
+# impact_joint.py: the impacts closing at the stage's start, compressed together, then bounced
+MODE_IMPACT_JOINT = IMPACT_JOINT
+MODE_IMPACT_BOUNCE = IMPACT_BOUNCE
 # relax of a scene with restitution: open gaps are left to the next substep's impact stage, which
 # bounces them with their full approach speed (a relax impulse would take part of it away)
 MODE_RELAX_CLOSED = 4

@@ -2,7 +2,10 @@
 
 After Box2D v3's solver stages (one list, consumed by each scheduler).  One substep is
 
-    [impact begin, pair contact times, IMPACT_SWEEPS impact sweeps, after-impacts hook]   only with impacts
+    [impact begin, pair contact times,                                 only with impacts
+     JOINT_ROUNDS compression rounds and one bounce sweep of the impacts closing at the start
+     (impact_joint.py), IMPACT_SWEEPS rounds of sequential impact sweeps (impact.py),
+     after-impacts hook]
     prepare, warm start
     `iterations` solve sweeps (soft bias)
     integrate
@@ -23,11 +26,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .impact import IMPACT_SWEEPS
-from .pair_solve import MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START
+from .impact import IMPACT_INNER, IMPACT_SWEEPS
+from .impact_joint import JOINT_ROUNDS
+from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE,
+                         MODE_WARM_START)
 
 IMPACT_BEGIN, IMPACT, AFTER_IMPACTS, PREPARE, WARM_START, SOLVE, INTEGRATE, RELAX, FINALIZE = range(9)
 SWEEPS = (IMPACT, SOLVE, RELAX)
+# the impact rounds, numbered through the stage: compression, bounce, then the sequential rounds
+BOUNCE_ROUND = JOINT_ROUNDS
+FIRST_SEQUENTIAL_ROUND = JOINT_ROUNDS + 1
 
 
 @dataclass(frozen=True)
@@ -48,13 +56,18 @@ class Stage:
         return self.index == self.count - 1
 
 
-def substep_plan(iterations: int, relax_iterations: int, impacts: bool) -> tuple[Stage, ...]:
+def substep_plan(iterations: int, relax_iterations: int, impacts: bool, joint: bool = False) -> tuple[Stage, ...]:
     """The stages of one substep.  ``impacts``: the substep has an impact stage (SoftStepSolver.runs_impacts);
-    a scene without runs no impact stage, and its relax sweeps close open gaps too."""
+    a scene without runs no impact stage, and its relax sweeps close open gaps too.  ``joint``: the
+    stage starts with the joint phase (SimConfig.simultaneous_impacts = "joint")."""
     plan = []
     if impacts:
         plan.append(Stage(IMPACT_BEGIN))
-        plan += [Stage(IMPACT, k, IMPACT_SWEEPS, MODE_IMPACT, reverse=k % 2) for k in range(IMPACT_SWEEPS)]
+        if joint:
+            plan += [Stage(IMPACT, k, JOINT_ROUNDS, MODE_IMPACT_JOINT, reverse=k % 2) for k in range(JOINT_ROUNDS)]
+            plan.append(Stage(IMPACT, BOUNCE_ROUND, 1, MODE_IMPACT_BOUNCE))
+        plan += [Stage(IMPACT, FIRST_SEQUENTIAL_ROUND + k, IMPACT_SWEEPS, MODE_IMPACT, reverse=k % 2)
+                 for k in range(IMPACT_SWEEPS)]
         plan.append(Stage(AFTER_IMPACTS))
     plan += [Stage(PREPARE), Stage(WARM_START)]
     plan += [Stage(SOLVE, k, iterations, MODE_SOLVE, use_bias=1, reverse=k % 2) for k in range(iterations)]
@@ -65,3 +78,19 @@ def substep_plan(iterations: int, relax_iterations: int, impacts: bool) -> tuple
              for k in range(relax_iterations)]
     plan.append(Stage(FINALIZE))
     return tuple(plan)
+
+
+def impact_round_sweeps(stage: Stage) -> int:
+    """Sweeps an impact round runs: one for the bounce (each member bounces once), else IMPACT_INNER."""
+    return 1 if stage.mode == MODE_IMPACT_BOUNCE else IMPACT_INNER
+
+
+def impact_first_since(stage: Stage, previous_sweep: int) -> int:
+    """The ``since`` of an impact round's first sweep (impact.unchanged_since): -1, every manifold
+    taken, in the first round of each phase: the joint phase's (each closing manifold's t*:
+    impact_joint.py) and the sequential one's (the manifolds the joint phase left, and a repeat for
+    the pairs found after the impacts); else ``previous_sweep``, the sweep in which the same launch
+    last took its manifolds."""
+    if stage.index in (0, FIRST_SEQUENTIAL_ROUND):
+        return -1
+    return previous_sweep

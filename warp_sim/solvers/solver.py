@@ -18,17 +18,22 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainC
 from ..launch import LIGHT_CHUNK, gpu_blocks, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
-from .domains import domain_sweep
+from .domains import domain_joint_sweep, domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
+from .impact_joint import pair_joint_pass, terrain_joint_impact, terrain_members
 from .pair_overflow import OverflowPairs
-from .pair_solve import MODE_IMPACT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES, chain_pass, pair_pass
-from .plan import AFTER_IMPACTS, FINALIZE, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX, SOLVE, WARM_START, substep_plan
+from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES,
+                         chain_pass, pair_pass)
+from .plan import (AFTER_IMPACTS, FINALIZE, FIRST_SEQUENTIAL_ROUND, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX,
+                   SOLVE, WARM_START, impact_first_since, impact_round_sweeps, substep_plan)
 from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, push_cap, soft_coefficients, soft_load, solve_and_integrate,
                         sweep_tolerance)
-from .solver_args import DomainSlabs, SolverBodies, StepSettings
+from .solver_args import DomainSlabs, JointImpacts, SolverBodies, StepSettings
 from .staged import (MAKE_ROWS, MAKE_ROWS_ALWAYS, MAKE_ROWS_NONE, finalize_bodies, integrate_positions, prepare_bodies,
                      terrain_sweep)
+
+JOINT_MODES = (MODE_IMPACT_JOINT, MODE_IMPACT_BOUNCE)
 
 
 @dataclass
@@ -56,6 +61,7 @@ class SolverSettings:
     solver: str = "soft_step"
     overflow_pairs: str = "auto"  # "auto": "split" on CUDA, "in_order" on the CPU (pair_overflow.py)
     face_friction: str = "patch"  # "points": friction at the manifold's points (collide/contact_patch.py)
+    simultaneous_impacts: str = "joint"  # "sequential": in pair order, no joint phase (impact_joint.py)
     impacts: str = "auto"  # "auto": the impact stage only in scenes with restitution; "always"
 
 
@@ -101,6 +107,11 @@ class SoftStepSolver:
         self.solver_support = wp.zeros(n, dtype=float, device=device)
         # each body's terrain patch: centre (as an arm) and friction arm scale (collide/contact_patch.py)
         self.solver_twist = wp.zeros(n, dtype=wp.vec4, device=device)
+        # the joint phase's scratch (impact_joint.py)
+        self.impact_v_start = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.impact_w_start = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.impact_terrain_event = wp.zeros(n, dtype=wp.vec2, device=device)
+        self.impact_member_count = wp.zeros(n, dtype=wp.int32, device=device)
 
     def _soft(self, dt: float):
         # one vec4 object per dt, so recorded launches see an unchanged argument
@@ -149,6 +160,7 @@ class SoftStepSolver:
             self._impact_scratch(contacts)
             a.pairs = bind(PairContacts, contacts, contacts)
             a.solver = bind(SolverBodies, self, self)
+            a.joint = bind(JointImpacts, self, self)
         return a
 
     def _step_settings(self, dt: float) -> StepSettings:
@@ -186,12 +198,18 @@ class SoftStepSolver:
         return self.terrain_row_slot, self.terrain_row_count
 
     def _impact_scratch(self, contacts):
-        """Per terrain slot: the impact's normal and tangential impulses (impact.py)."""
+        """Per terrain slot: the impact's normal and tangential impulses (impact.py); per pair, a
+        simultaneous impact's member (impact_joint.py)."""
         slots = max(contacts.terrain_contact_active.shape[0], 1)
         normal = getattr(self, "impact_normal", None)
         if normal is None or normal.shape[0] < slots:
             self.impact_normal = wp.zeros(slots, dtype=float, device=self.device)
             self.impact_tangent = wp.zeros(slots, dtype=wp.vec3, device=self.device)
+        pairs = max(getattr(contacts, "pair_max", 0), 1)
+        events = getattr(self, "impact_pair_event", None)
+        if events is None or events.shape[0] < pairs:
+            self.impact_pair_event = wp.zeros(pairs, dtype=wp.vec2, device=self.device)
+            self.impact_pair_acc = wp.zeros(pairs, dtype=wp.vec4, device=self.device)
         return self.impact_normal, self.impact_tangent
 
     def _site(self, state, *name):
@@ -255,7 +273,8 @@ class SoftStepSolver:
         """The impact stage's start (impact.py): the velocities the last solve left, without this
         substep's gravity.  Run where runs_impacts says."""
         launch(impact_begin, m.body_count, key=self, inputs=[
-            a.model, a.settings, int(fresh_contacts), a.state_in, a.solver], device=self.device)
+            a.model, a.settings, int(fresh_contacts), a.state_in, a.solver, int(self.joint_impacts), a.joint],
+               device=self.device)
 
     def _pair_contact_times(self, a):
         """Each body's earliest pair event of the substep, which shadows its later terrain
@@ -263,17 +282,40 @@ class SoftStepSolver:
         One launch, never split: Warp's CPU atomics are not atomic across chunks (launch.py)."""
         if a.contacts.pair_max > 0:
             wp.launch(pair_contact_times, dim=a.contacts.pair_max, device=self.device, **gpu_blocks(self.device), inputs=[
-                0, a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver])
+                0, a.model, a.settings, a.contacts.pair_count, a.pairs, a.solver, int(self.joint_impacts), a.joint])
 
-    def _impact_sweep(self, m, a, pairs, impact_round: int):
-        """One impact stage's IMPACT_INNER sweeps: every body's terrain impact, then the pairs'
-        (colour by colour), numbered so that manifolds no impact has touched since are skipped."""
-        for u in range(IMPACT_INNER):
-            sweep = impact_round * IMPACT_INNER + u
-            since = sweep - 1 if sweep > 0 else -1
-            launch(terrain_impact, m.body_count, key=self,
-                   inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
-            pairs(MODE_IMPACT, sweep, since)
+    @property
+    def joint_impacts(self) -> bool:
+        """Whether the impact stage starts with the joint phase (impact_joint.py)."""
+        return self.settings.simultaneous_impacts == "joint"
+
+    def _impact_members(self, m, a):
+        """Each body's terrain manifold closing at the stage's start, counted with its closing pairs
+        (impact_joint.terrain_members); after the pairs' contact times."""
+        launch(terrain_members, m.body_count, key=self, inputs=[a.model, a.settings, a.slots, a.solver, a.joint],
+               device=self.device)
+
+    def _impact_sweep(self, m, a, pairs, color_sizes, stage):
+        """One impact round's sweeps (plan.impact_round_sweeps) in its phase (``stage.mode``): every
+        body's terrain impact, then the pairs' (colour by colour), numbered so that manifolds no
+        impact has touched since are skipped (plan.impact_first_since)."""
+        for u in range(impact_round_sweeps(stage)):
+            sweep = stage.index * IMPACT_INNER + u
+            since = impact_first_since(stage, sweep - 1) if u == 0 else sweep - 1
+            if stage.mode == MODE_IMPACT:
+                launch(terrain_impact, m.body_count, key=self,
+                       inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
+                pairs(stage.mode, sweep, since)
+                continue
+            launch(terrain_joint_impact, m.body_count, key=self,
+                   inputs=[stage.mode, a.model, a.settings, a.slots, a.solver, a.joint, sweep, since], device=self.device)
+            c = a.contacts
+            # the overflow pairs take their impacts in sequence only (impact_joint.py)
+            for color, size in enumerate(color_sizes[:COLOR_COUNT]):
+                if size:
+                    launch(pair_joint_pass, size, key=self, inputs=[
+                        stage.mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings,
+                        a.pairs, a.solver, a.joint], device=self.device)
 
     def _step_staged(self, model, contacts, a, color_sizes, fresh_contacts, domains=None, after_impacts=None):
         if domains is not None:
@@ -297,7 +339,8 @@ class SoftStepSolver:
                 if color == COLOR_COUNT and self._split_overflow():
                     # pairs that share bodies, swept at once with split masses (pair_overflow.py)
                     # recount at the substep's first pair stage after a colouring (impacts come first)
-                    recount = mode == MODE_WARM_START or (mode == MODE_IMPACT and sweep == 0)
+                    recount = mode == MODE_WARM_START or (mode == MODE_IMPACT
+                                                          and sweep == FIRST_SEQUENTIAL_ROUND * IMPACT_INNER)
                     overflow.stage(mode, overflow.threads(size), recount, c, m.body_inv_mass, a.model, a.settings,
                                    a.pairs, a.solver, self.solver_v, self.solver_w, sweep, since)
                     if mode == MODE_SOLVE and m.has_mass_ratio:
@@ -317,26 +360,28 @@ class SoftStepSolver:
                         mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
                         a.solver], device=dev)
 
-        plan = substep_plan(s.iterations, s.relax_iterations, self.runs_impacts(m))
+        plan = substep_plan(s.iterations, s.relax_iterations, self.runs_impacts(m), self.joint_impacts)
 
-        def impact_sweeps():
+        def sequential_impact_sweeps():
             for stage in plan:
-                if stage.kind == IMPACT:
-                    self._impact_sweep(m, a, pairs, stage.index)
+                if stage.kind == IMPACT and stage.mode == MODE_IMPACT:
+                    self._impact_sweep(m, a, pairs, color_sizes, stage)
 
         def impacts_again(sizes):
             nonlocal color_sizes
             color_sizes = sizes
             self._pair_contact_times(a)
-            impact_sweeps()
+            sequential_impact_sweeps()
 
         for stage in plan:
             kind = stage.kind
             if kind == IMPACT_BEGIN:
                 self._impact_begin(m, a, fresh_contacts)
                 self._pair_contact_times(a)
+                if self.joint_impacts:
+                    self._impact_members(m, a)
             elif kind == IMPACT:
-                self._impact_sweep(m, a, pairs, stage.index)
+                self._impact_sweep(m, a, pairs, color_sizes, stage)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     color_sizes = after_impacts(impacts_again)
@@ -379,21 +424,38 @@ class SoftStepSolver:
                   a.slots, a.pairs, a.solver, a.state_out, a.bad_steps]
         state_in = a.buffer_in
 
-        def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0, impact_round=0):
+        def sweep(mode: int, reverse: int, prepare: int = 0, integrate: int = 0, finalize: int = 0, impact=None):
+            impact_round = impact.index if impact is not None else 0
+
+            def since(boundary: int) -> int:  # of the round's first sweep (domains.impact_sweep_number)
+                if impact is None:
+                    return -1
+                return impact_first_since(impact, ((2 * impact_round - 2 + boundary) + 1) * IMPACT_INNER - 1)
+
+            if mode in JOINT_MODES:
+                joint = [slabs, a.model, a.settings, a.slots, a.pairs, a.solver, a.joint]
+                launch(domain_joint_sweep, g.domain_count, [0, g.domain_count, mode, reverse, impact_round, since(0),
+                                                            *joint], dev,
+                       key=self._site(state_in, "joint slabs", mode, reverse, impact_round), min_chunk=1)
+                if g.boundary_pairs:
+                    launch(domain_joint_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, impact_round,
+                                                   since(1), *joint], dev,
+                           key=self._site(state_in, "joint boundary", mode, reverse, impact_round), min_chunk=1)
+                return
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
-                                                  impact_round, int(m.has_mass_ratio), *shared], dev,
+                                                  impact_round, since(0), int(m.has_mass_ratio), *shared], dev,
                    key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize, impact_round),
                    min_chunk=1)
             if g.boundary_pairs:
                 launch(domain_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, 0, integrate, finalize,
-                                         impact_round, int(m.has_mass_ratio), *shared], dev,
+                                         impact_round, since(1), int(m.has_mass_ratio), *shared], dev,
                        key=self._site(state_in, "boundary", mode, reverse, integrate, finalize, impact_round),
                        min_chunk=1)
 
         if g.static_bodies:
-            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, 0, *shared], dev,
+            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, -1, 0, *shared], dev,
                    key=self._site(state_in, "static"), min_chunk=1)
-        plan = substep_plan(s.iterations, s.relax_iterations, impacts)
+        plan = substep_plan(s.iterations, s.relax_iterations, impacts, self.joint_impacts)
         # the per-body stages ride on the sweeps next to them (module docstring of plan.py)
         fused_with_solve = s.iterations > 0
         fused_with_relax = s.relax_iterations > 0
@@ -401,8 +463,8 @@ class SoftStepSolver:
         def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
             self._pair_contact_times(a)
             for again in plan:
-                if again.kind == IMPACT:
-                    sweep(again.mode, again.reverse, impact_round=again.index)
+                if again.kind == IMPACT and again.mode == MODE_IMPACT:
+                    sweep(again.mode, again.reverse, impact=again)
 
         for stage in plan:
             kind = stage.kind
@@ -410,8 +472,10 @@ class SoftStepSolver:
                 # its own launch: the pairs' contact times read every body's impact velocities
                 self._impact_begin(m, a, fresh_contacts)
                 self._pair_contact_times(a)
+                if self.joint_impacts:
+                    self._impact_members(m, a)
             elif kind == IMPACT:
-                sweep(stage.mode, stage.reverse, impact_round=stage.index)
+                sweep(stage.mode, stage.reverse, impact=stage)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     after_impacts(impacts_again)

@@ -58,6 +58,20 @@ class SolverBodies:
 
 
 @wp.struct
+class JointImpacts:
+    """The joint phase's scratch (impact_joint.py; SoftStepSolver's arrays of the same names), apart
+    from SolverBodies so that the kernels of a scene without it carry none of it."""
+
+    # Solver in/out
+    impact_v_start: wp.array(dtype=wp.vec3)  # the impact stage's start velocities
+    impact_w_start: wp.array(dtype=wp.vec3)
+    impact_terrain_event: wp.array(dtype=wp.vec2)  # a body's terrain member: (t*, e); t* < 0: none
+    impact_member_count: wp.array(dtype=wp.int32)  # manifolds of the body closing at the stage's start
+    impact_pair_event: wp.array(dtype=wp.vec2)  # per pair: a member's (t*, e)
+    impact_pair_acc: wp.array(dtype=wp.vec4)  # per pair: a member's compression impulse at each point
+
+
+@wp.struct
 class DomainSlabs:
     """The slabs of solvers/domains.py (collide/pair_pipeline.DomainSchedule's arrays)."""
 

@@ -1,0 +1,429 @@
+"""Simultaneous impacts: the manifolds that close at the impact stage's start are one impact.
+
+Taken one after another (impact.py's sweeps, in pair order), a ball dropped onto the seam of two
+touching balls gave the first pair the whole blow: the striker left 0.65 m/s sideways (e = 1)
+and one lower ball took twice the other's speed; a ball dropped into a V-groove bounced off one
+face only.  Any offset between the two contact times makes that sequence right, which side
+depending on which is touched first; but a symmetric scene is exactly simultaneous, and within
+one substep the offset cannot be told.  So the stage starts with Poisson's hypothesis over the
+union of the manifolds that close on the stage's start velocities (each at its own t*: the ones
+the sequential stage's first sweep would strike; impact.pair_contact_times and terrain_members
+mark and count them) and share a dynamic body with another (``member``; a closing manifold alone
+on its bodies gets the same answer from the sequential sweeps, which take it):
+
+    compression: P_c >= 0 at every engaged point of every member, no engaged point approaching,
+                 P_c . v_n = 0   (projected Gauss-Seidel over the members, the impulses kept
+                 from sweep to sweep: JOINT_ROUNDS rounds of IMPACT_INNER sweeps)
+    restitution: P_r = e P_c at every point, each member with its own e (one bounce sweep)
+    friction:    Coulomb on (1 + e) P_c, per member, after its restitution
+
+For frictionless members v_c is the M-metric projection of v- onto the velocities that approach
+at no engaged point (unique even when P_c is not), so a symmetric blow gives a symmetric result
+and |v+|^2_M = (1 - e^2) |v_c|^2_M + e^2 |v-|^2_M: kinetic energy kept for e = 1, lost otherwise
+(impact.py's identity, now over the union).  Each member's rows are taken at its own t*, at the
+pose the start velocities carry the bodies to (they are not revised while the compression
+converges), and each member's impulses shift its bodies by t* dv (impact.py says why).
+
+"At once" is within one substep: contacts that close in successive substeps are successive
+impacts, so a symmetric scene whose contacts meet exactly at a substep's end can have float32's
+rounding of its positions (1e-8) put one of them in the next substep and take it in sequence.
+
+What the members set off is then taken in sequence (impact.py): a contact that was not closing at
+the start, such as the next ball of a row struck at one end, is a later event, so a row of
+touching balls still carries a blow as Newton's cradle does.  The split overflow pairs
+(pair_overflow.py) are never members: they are taken in sequence only.
+"""
+
+import warp as wp
+
+from ..kernel_args import BodyModel, PairContacts, TerrainContacts
+from ..schedule.coloring import color_range
+from .impact import CLOSING, NOT_MEMBER, OTHER_EVENT, unchanged_since
+from .impact_pair import compress_pair, pair_engagement, pair_impact_friction, pair_manifold_at, restitute_pair
+from .impact_point import free_fall_share
+from .impact_terrain import IMPACT_SPEED_TOLERANCE, NOT_ENGAGED, compress_terrain, restitute_terrain, terrain_engagement
+from .solver_args import JointImpacts, SolverBodies, StepSettings
+
+wp.set_module_options({"enable_backward": False})
+
+# The impact stage's phases, as pair_solve's modes: the sequential sweeps (impact.py), the
+# members' compression, their restitution and friction.
+IMPACT_SEQUENTIAL = 3
+IMPACT_JOINT = 5
+IMPACT_BOUNCE = 6
+# Rounds of IMPACT_INNER compression sweeps.  Two members sharing a body converge as the coupling
+# of their rows through it (a ball in a 20-degree V: the cosine of the faces' angle, 0.77; a ball
+# struck onto the seam of two 3 kg balls: 0.375), a factor of its square a sweep pair.  On the
+# slab schedule two members in different slabs (one a boundary pair) meet once a round, whatever
+# the sweeps within it: 4 rounds left the seam with 3 kg balls 1.1e-3 off in energy, 6 do not.  A
+# member whose bodies no impulse has changed since its last sweep is skipped, so the rounds cost
+# only where the compression is still moving (and the launches).
+JOINT_ROUNDS = 6
+
+
+@wp.func
+def shares_a_body(i: int, j: int, joint: JointImpacts) -> bool:
+    """Whether a closing manifold of bodies i and j shares a dynamic body with another: only then
+    does the joint phase differ from the sequential one, which takes the others (impact.py)."""
+    return wp.max(joint.impact_member_count[i], joint.impact_member_count[j]) >= 2
+
+
+@wp.func(inline=False)
+def joint_pair(
+    p: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+    impact_since: int,
+):
+    """A compression sweep's visit of pair p.  The phase's first sweep (``impact_since`` < 0) finds
+    a closing pair's t* and e on the stage's start velocities (impact.pair_contact_times marked it
+    closing) where it shares a body with another closing manifold, and leaves the rest to the
+    sequential sweeps."""
+    event = joint.impact_pair_event[p]
+    if impact_since < 0:
+        if event[0] != CLOSING[0]:
+            return
+    elif event[0] < 0.0:
+        return
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    count = pairs.pair_point_count[p]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    if impact_since < 0 and not shares_a_body(i, j, joint):
+        joint.impact_pair_event[p] = NOT_MEMBER
+        return
+    vsi = joint.impact_v_start[i]
+    wsi = joint.impact_w_start[i]
+    vsj = joint.impact_v_start[j]
+    wsj = joint.impact_w_start[j]
+    dpi = solver.solver_drift_p[i]
+    dpj = solver.solver_drift_p[j]
+    acc = wp.vec4(NOT_ENGAGED)
+    if impact_since < 0:
+        engagement = pair_engagement(p, model, settings, pairs, solver, vsi, wsi, vsj, wsj, inv_mi, inv_mj, dpi, dpj,
+                                     0.0)
+        if engagement.hit == 0:
+            joint.impact_pair_event[p] = NOT_MEMBER
+            return
+        e = wp.max(model.body_restitution[i], model.body_restitution[j])
+        event = wp.vec2(engagement.toi, wp.where(engagement.bounces == 0, 0.0, e))
+        acc = engagement.acc
+        joint.impact_pair_event[p] = event
+    else:
+        stamps = solver.solver_impact_stamp
+        if unchanged_since(stamps[i], impact_since) and unchanged_since(stamps[j], impact_since):
+            return
+        acc = joint.impact_pair_acc[p]
+    toi = event[0]
+    m = pair_manifold_at(p, toi, model, pairs, solver, vsi, wsi, vsj, wsj, dpi, dpj, acc)
+    gi = (free_fall_share(inv_mi, solver.solver_support[i]) * toi) * settings.gravity
+    gj = (free_fall_share(inv_mj, solver.solver_support[j]) * toi) * settings.gravity
+    m.vi = solver.solver_v[i] + gi
+    m.wi = solver.solver_w[i]
+    m.vj = solver.solver_v[j] + gj
+    m.wj = solver.solver_w[j]
+    before = m.acc
+    vi_in = m.vi
+    vj_in = m.vj
+    m = compress_pair(m, count, inv_mi, inv_mj, solver.solver_inv_inertia[i], solver.solver_inv_inertia[j])
+    joint.impact_pair_acc[p] = m.acc
+    moved = float(0.0)  # the most normal speed this visit changed at a point (the stamp's test)
+    for k in range(count):
+        moved = wp.max(moved, (inv_mi + inv_mj) * wp.abs(m.acc[k] - before[k]))
+    stamp = impact_since < 0 or moved >= IMPACT_SPEED_TOLERANCE
+    # only dynamic bodies are written: a static body may sit in many pairs of one colour
+    if inv_mi > 0.0:
+        solver.solver_v[i] = m.vi - gi
+        solver.solver_w[i] = m.wi
+        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (vi_in - m.vi)
+        if stamp:
+            solver.solver_impact_stamp[i] = impact_sweep
+    if inv_mj > 0.0:
+        solver.solver_v[j] = m.vj - gj
+        solver.solver_w[j] = m.wj
+        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + toi * (vj_in - m.vj)
+        if stamp:
+            solver.solver_impact_stamp[j] = impact_sweep
+
+
+@wp.func(inline=False)
+def bounce_pair(
+    p: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+):
+    """A member's restitution, e P_c at each point, and its friction; the membership is spent."""
+    event = joint.impact_pair_event[p]
+    if event[0] < 0.0:
+        return
+    joint.impact_pair_event[p] = NOT_MEMBER
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    count = pairs.pair_point_count[p]
+    inv_mi = model.body_inv_mass[i]
+    inv_mj = model.body_inv_mass[j]
+    inv_ii = solver.solver_inv_inertia[i]
+    inv_ij = solver.solver_inv_inertia[j]
+    toi = event[0]
+    e = event[1]
+    m = pair_manifold_at(p, toi, model, pairs, solver, joint.impact_v_start[i], joint.impact_w_start[i],
+                         joint.impact_v_start[j], joint.impact_w_start[j], solver.solver_drift_p[i],
+                         solver.solver_drift_p[j], joint.impact_pair_acc[p])
+    gi = (free_fall_share(inv_mi, solver.solver_support[i]) * toi) * settings.gravity
+    gj = (free_fall_share(inv_mj, solver.solver_support[j]) * toi) * settings.gravity
+    m.vi = solver.solver_v[i] + gi
+    m.wi = solver.solver_w[i]
+    m.vj = solver.solver_v[j] + gj
+    m.wj = solver.solver_w[j]
+    vi_in = m.vi
+    vj_in = m.vj
+    m = restitute_pair(m, count, e, inv_mi, inv_mj, inv_ii, inv_ij)
+    mu = wp.sqrt(model.body_friction[i] * model.body_friction[j])
+    if mu > 0.0:
+        m = pair_impact_friction(m, count, e, mu, inv_mi, inv_mj, inv_ii, inv_ij)
+    if inv_mi > 0.0:
+        solver.solver_v[i] = m.vi - gi
+        solver.solver_w[i] = m.wi
+        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (vi_in - m.vi)
+        solver.solver_impact_stamp[i] = impact_sweep
+        solver.solver_event_time[i] = toi
+        solver.solver_event_partner[i] = j
+    if inv_mj > 0.0:
+        solver.solver_v[j] = m.vj - gj
+        solver.solver_w[j] = m.wj
+        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + toi * (vj_in - m.vj)
+        solver.solver_impact_stamp[j] = impact_sweep
+        solver.solver_event_time[j] = toi
+        solver.solver_event_partner[j] = i
+
+
+@wp.func(inline=False)
+def joint_terrain_body(
+    i: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+    impact_since: int,
+):
+    """A compression sweep's visit of body i's terrain manifold (as joint_pair's of a pair; the
+    engagement, found by terrain_members, is kept in impact_normal)."""
+    event = joint.impact_terrain_event[i]
+    if event[0] < 0.0:
+        return
+    if impact_since < 0 and joint.impact_member_count[i] < 2:
+        joint.impact_terrain_event[i] = NOT_MEMBER
+        return
+    if impact_since >= 0 and unchanged_since(solver.solver_impact_stamp[i], impact_since):
+        return
+    start = model.body_checkpoint_start[i]
+    count = model.body_checkpoint_count[i]
+    x = solver.solver_ref_pos[i]
+    inv_mass = model.body_inv_mass[i]
+    toi = event[0]
+    v = solver.solver_v[i] + toi * settings.gravity
+    compressed = compress_terrain(start, count, x, v, solver.solver_w[i], inv_mass, solver.solver_inv_inertia[i],
+                                  slots.terrain_contact_point, slots.terrain_contact_normal, solver.impact_normal)
+    solver.solver_v[i] = compressed.v - toi * settings.gravity
+    solver.solver_w[i] = compressed.w
+    solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (v - compressed.v)
+    if impact_since < 0 or compressed.hit != 0:
+        solver.solver_impact_stamp[i] = impact_sweep
+
+
+@wp.kernel
+def terrain_members(
+    tid_offset: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+):
+    """Each body's terrain manifold: a member (its t* and e) where it closes on the stage's start
+    velocities, counted with the body's closing pairs (run after impact.pair_contact_times, whose
+    pair times shadow the terrain's as in the sequential sweeps)."""
+    i = wp.tid() + tid_offset
+    joint.impact_terrain_event[i] = NOT_MEMBER
+    if model.body_inv_mass[i] == 0.0:
+        return
+    engagement = terrain_engagement(model.body_checkpoint_start[i], model.body_checkpoint_count[i],
+                                    solver.solver_ref_pos[i], joint.impact_v_start[i], joint.impact_w_start[i],
+                                    solver.solver_drift_p[i], solver.solver_drift_r[i], wp.vec3(0.0), settings.h,
+                                    settings.gravity, settings.restitution_threshold, solver.solver_pair_toi[i],
+                                    settings.soft[3], slots.terrain_contact_active, slots.terrain_contact_point,
+                                    slots.terrain_contact_normal, slots.terrain_contact_depth, solver.impact_normal,
+                                    solver.impact_tangent)
+    if engagement.hit != 0:
+        joint.impact_terrain_event[i] = wp.vec2(engagement.toi,
+                                                 wp.where(engagement.bounces == 0, 0.0, model.body_restitution[i]))
+        joint.impact_member_count[i] = joint.impact_member_count[i] + 1
+
+
+@wp.func(inline=False)
+def bounce_terrain_body(
+    i: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+):
+    """Body i's terrain member's restitution and friction (as bounce_pair's)."""
+    event = joint.impact_terrain_event[i]
+    if event[0] < 0.0:
+        return
+    joint.impact_terrain_event[i] = NOT_MEMBER
+    toi = event[0]
+    v = solver.solver_v[i] + toi * settings.gravity
+    bounced = restitute_terrain(model.body_checkpoint_start[i], model.body_checkpoint_count[i],
+                                solver.solver_ref_pos[i], v, solver.solver_w[i], model.body_inv_mass[i],
+                                solver.solver_inv_inertia[i], event[1], model.body_friction[i],
+                                slots.terrain_contact_point, slots.terrain_contact_normal, solver.impact_normal,
+                                solver.impact_tangent)
+    solver.solver_v[i] = bounced.v - toi * settings.gravity
+    solver.solver_w[i] = bounced.w
+    solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (v - bounced.v)
+    solver.solver_impact_stamp[i] = impact_sweep
+    solver.solver_event_partner[i] = OTHER_EVENT
+
+
+@wp.func
+def takes_part(event: wp.vec2, phase: int, impact_since: int) -> bool:
+    """Whether a manifold with this event has work in a sweep of the joint or bounce phase: its
+    first sweep looks at the closing ones, the later sweeps and the bounce at the members.  Read
+    before the visit, which is not inlined: the joint functions inlined into the sweep kernels
+    slowed every mode of them (the slab kernel's sequential impact sweeps by 80 %)."""
+    if phase == IMPACT_JOINT and impact_since < 0:
+        return event[0] == CLOSING[0] or event[0] >= 0.0
+    return event[0] >= 0.0
+
+
+@wp.func(inline=True)
+def joint_phase_pair(
+    p: int,
+    phase: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+    impact_since: int,
+):
+    """Pair p in a sweep of the joint phase (IMPACT_JOINT) or its bounce (IMPACT_BOUNCE)."""
+    if not takes_part(joint.impact_pair_event[p], phase, impact_since):
+        return
+    if phase == IMPACT_JOINT:
+        joint_pair(p, model, settings, pairs, solver, joint, impact_sweep, impact_since)
+    else:
+        bounce_pair(p, model, settings, pairs, solver, joint, impact_sweep)
+
+
+@wp.func(inline=True)
+def terrain_impact_in_phase(
+    i: int,
+    phase: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    impact_sweep: int,
+    impact_since: int,
+):
+    """Body i's terrain manifold in a sweep of the joint phase (IMPACT_JOINT) or its bounce."""
+    if takes_part(joint.impact_terrain_event[i], IMPACT_BOUNCE, impact_since):
+        if phase == IMPACT_JOINT:
+            joint_terrain_body(i, model, settings, slots, solver, joint, impact_sweep, impact_since)
+        else:
+            bounce_terrain_body(i, model, settings, slots, solver, joint, impact_sweep)
+
+
+@wp.kernel
+def terrain_joint_impact(
+    tid_offset: int,
+    phase: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    slots: TerrainContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+    # In
+    impact_sweep: int,
+    impact_since: int,
+):
+    # the colour schedule's launch of terrain_impact_in_phase over the bodies (domain_joint_sweep calls it too)
+    terrain_impact_in_phase(wp.tid() + tid_offset, phase, model, settings, slots, solver, joint, impact_sweep, impact_since)
+
+
+@wp.kernel
+def pair_joint_pass(
+    tid_offset: int,
+    phase: int,
+    impact_sweep: int,
+    impact_since: int,
+    color: int,
+    color_start: wp.array(dtype=wp.int32),
+    color_pairs_sorted: wp.array(dtype=wp.int32),
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+    joint: JointImpacts,
+):
+    """One colour's pairs in a sweep of the joint phase or its bounce (the colour schedule's
+    pair_solve.pair_pass, a kernel of its own as domains.domain_joint_sweep says why)."""
+    r = color_range(color, color_start, wp.tid() + tid_offset)
+    for index in range(r[0], r[1]):
+        joint_phase_pair(color_pairs_sorted[index], phase, model, settings, pairs, solver, joint, impact_sweep, impact_since)
