@@ -26,7 +26,7 @@ def test_full_runs_default_to_results(tmp_path):
 
 
 @pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain", "body_order",
-                                   "face_friction"])
+                                   "face_friction", "simultaneous_impacts"])
 def test_quick_into_results_is_refused(bench):
     import importlib
 
@@ -83,6 +83,23 @@ def test_face_friction_quick_writes_both_choices_and_the_chart(tmp_path):
         assert row["spin_at_end_rad_s"] < face_friction.SPIN
         assert (abs(row["ratio"] - 1.0) < 0.01) == (choice == "patch")
     assert (tmp_path / "face_friction.png").stat().st_size > 0
+
+
+def test_simultaneous_impacts_quick_measures_both_models_on_both_schedules(tmp_path):
+    """The seam drop at smoke size: the joint phase leaves the striker straight (1e-3 of its 3 m/s,
+    as tests/test_simultaneous_impacts.py), the sequential one sideways, energy kept by both."""
+    import json
+
+    from bench import simultaneous_impacts
+
+    simultaneous_impacts.main(["--quick", "--out-dir", str(tmp_path)])
+    rows = json.loads((tmp_path / "simultaneous_impacts.json").read_text())["rows"]
+    runs = {(r["simultaneous_impacts"], r["pair_schedule"]): r for r in rows}
+    assert set(runs) == {(m, s) for m in ("sequential", "joint") for s in ("domains", "colors")}
+    for (model, _), row in runs.items():
+        assert (row["seam_striker_sideways_m_s"] < 3e-3) == (model == "joint")
+        assert abs(float(row["seam_energy_error"])) < 1e-3
+    assert (tmp_path / "simultaneous_impacts.png").stat().st_size > 0
 
 
 def test_thin_rain_runs_every_setting_on_each_layout(tmp_path):

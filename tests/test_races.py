@@ -49,11 +49,13 @@ def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overla
     assert check.isolated.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
     # the neighbour-timer gather and the wake marks use atomics, so they run as one launch, never
     # split (launch.py); the slab schedule colours no pairs
-    kernels = ["collide_terrain", "collide_pairs", "carry_pair_impulses", "store_pairs", "update_sleep", "wake_marked",
-               "terrain_members"]  # and the joint phase of the impacts (solvers/impact_joint.py):
-    kernels.append("pair_joint_pass" if schedule == "colors" else "domain_joint_sweep")
+    kernels = ["collide_terrain", "collide_pairs", "carry_pair_impulses", "store_pairs", "update_sleep", "wake_marked"]
+    # and the joint phase of the impacts (solvers/impact_joint.py): its parallel sweeps on colours, one
+    # thread on slabs
+    kernels += ["terrain_members", "terrain_joint_impact", "pair_joint_pass"] if schedule == "colors" else [
+        "joint_phase_in_order"]
     if schedule == "colors":
-        kernels += ["color_pick", "color_bounds", "terrain_joint_impact"]
+        kernels += ["color_pick", "color_bounds"]
         if top_mass >= 10.0:
             kernels.append("chain_pass")  # the heavy-on-light passes, a launch of their own
     for kernel in kernels:

@@ -36,11 +36,10 @@ import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import IMPACT_INNER, impact_terrain_body
-from .impact_joint import joint_phase_pair, terrain_impact_in_phase
-from .pair_solve import (MODE_IMPACT, MODE_IMPACT_JOINT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START,
-                         chain_pair, pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
+from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
+                         pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
                          warm_start_pair_side)
-from .solver_args import DomainSlabs, JointImpacts, SolverBodies, StepSettings
+from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
 wp.set_module_options({"enable_backward": False})
@@ -230,50 +229,3 @@ def domain_sweep(
             if finalize != 0:
                 finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
 
-
-@wp.kernel
-def domain_joint_sweep(
-    tid_offset: int,
-    first_domain: int,
-    domain_count: int,
-    mode: int,
-    reverse: int,
-    impact_round: int,
-    impact_since: int,
-    # In
-    slabs: DomainSlabs,
-    # Model
-    model: BodyModel,
-    # Settings
-    settings: StepSettings,
-    # Contacts in
-    slots: TerrainContacts,
-    pairs: PairContacts,
-    # Solver in/out
-    solver: SolverBodies,
-    joint: JointImpacts,
-):
-    """A round of the joint phase's sweeps (impact_joint.py, ``mode`` MODE_IMPACT_JOINT or its
-    bounce) walked as domain_sweep walks its impact sweeps: a slab's bodies' terrain manifolds, then
-    its pairs; the boundary pairs when d == domain_count.  A kernel of its own: the joint visits
-    compiled into domain_sweep slowed its other modes (its sequential impact sweeps by half)."""
-    d = first_domain + wp.tid() + tid_offset
-    boundary = wp.where(d == domain_count, 1, 0)
-    pair_first = slabs.domain_pair_start[d]
-    pair_count = slabs.domain_pair_start[d + 1] - pair_first
-    body_first = slabs.domain_body_start[d]
-    body_count = wp.where(boundary == 1, 0, slabs.domain_body_start[d + 1] - body_first)
-    inner = wp.where(mode == MODE_IMPACT_JOINT, IMPACT_INNER, 1)
-    for u in range(inner):
-        sweep = impact_sweep_number(impact_round, boundary, u)
-        since = impact_sweep_since(impact_round, boundary, u, impact_since)
-        direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
-        for part in range(2):
-            if (part == 0) == (direction == 0):
-                for k in range(body_count):
-                    terrain_impact_in_phase(slabs.domain_body[walk(body_first, body_count, k, direction)], mode,
-                                            model, settings, slots, solver, joint, sweep, since)
-            else:
-                for k in range(pair_count):
-                    joint_phase_pair(slabs.domain_pair[walk(pair_first, pair_count, k, direction)], mode, model,
-                                     settings, pairs, solver, joint, sweep, since)

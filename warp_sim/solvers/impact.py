@@ -481,13 +481,16 @@ def pair_contact_times(
     if toi < settings.h:
         wp.atomic_min(solver.solver_pair_toi, i, toi)
         wp.atomic_min(solver.solver_pair_toi, j, toi)
-        # a member of the stage's simultaneous impact, counted on its dynamic bodies (impact_joint.py;
-        # a static body couples nothing); the count is an integer sum, the same in any thread order
-        if joint_phase != 0:
+        # a member of the stage's simultaneous impact where its gap is still open (impact_joint.py
+        # says why), counted on its dynamic bodies (a static body couples nothing); the count is an
+        # integer sum, the same in any thread order
+        if joint_phase != 0 and toi > 0.0:
             joint.impact_pair_event[p] = CLOSING
             if model.body_inv_mass[i] > 0.0:
                 wp.atomic_add(joint.impact_member_count, i, 1)
             if model.body_inv_mass[j] > 0.0:
                 wp.atomic_add(joint.impact_member_count, j, 1)
+        elif joint_phase != 0:
+            joint.impact_pair_event[p] = NOT_MEMBER
     elif joint_phase != 0:
         joint.impact_pair_event[p] = NOT_MEMBER

@@ -18,10 +18,10 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainC
 from ..launch import LIGHT_CHUNK, gpu_blocks, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
-from .domains import domain_joint_sweep, domain_sweep
+from .domains import domain_sweep
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
-from .impact_joint import pair_joint_pass, terrain_joint_impact, terrain_members
+from .impact_joint import joint_phase_in_order, pair_joint_pass, terrain_joint_impact, terrain_members
 from .pair_overflow import OverflowPairs
 from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES,
                          chain_pass, pair_pass)
@@ -210,6 +210,8 @@ class SoftStepSolver:
         if events is None or events.shape[0] < pairs:
             self.impact_pair_event = wp.zeros(pairs, dtype=wp.vec2, device=self.device)
             self.impact_pair_acc = wp.zeros(pairs, dtype=wp.vec4, device=self.device)
+            self.impact_member_list = wp.zeros(pairs + self.impact_v_start.shape[0], dtype=wp.int32,
+                                               device=self.device)
         return self.impact_normal, self.impact_tangent
 
     def _site(self, state, *name):
@@ -433,14 +435,11 @@ class SoftStepSolver:
                 return impact_first_since(impact, ((2 * impact_round - 2 + boundary) + 1) * IMPACT_INNER - 1)
 
             if mode in JOINT_MODES:
-                joint = [slabs, a.model, a.settings, a.slots, a.pairs, a.solver, a.joint]
-                launch(domain_joint_sweep, g.domain_count, [0, g.domain_count, mode, reverse, impact_round, since(0),
-                                                            *joint], dev,
-                       key=self._site(state_in, "joint slabs", mode, reverse, impact_round), min_chunk=1)
-                if g.boundary_pairs:
-                    launch(domain_joint_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, impact_round,
-                                                   since(1), *joint], dev,
-                           key=self._site(state_in, "joint boundary", mode, reverse, impact_round), min_chunk=1)
+                # the whole joint phase in one launch at its first round (impact_joint.joint_phase_in_order)
+                if impact is not None and impact.index == 0:
+                    launch(joint_phase_in_order, 1, [m.body_count, a.model, a.settings, a.slots, a.contacts.pair_count,
+                                                     a.pairs, a.solver, a.joint], dev,
+                           key=self._site(state_in, "joint"), min_chunk=1)
                 return
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
                                                   impact_round, since(0), int(m.has_mass_ratio), *shared], dev,
@@ -472,8 +471,6 @@ class SoftStepSolver:
                 # its own launch: the pairs' contact times read every body's impact velocities
                 self._impact_begin(m, a, fresh_contacts)
                 self._pair_contact_times(a)
-                if self.joint_impacts:
-                    self._impact_members(m, a)
             elif kind == IMPACT:
                 sweep(stage.mode, stage.reverse, impact=stage)
             elif kind == AFTER_IMPACTS:

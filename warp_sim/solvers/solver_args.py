@@ -69,6 +69,7 @@ class JointImpacts:
     impact_member_count: wp.array(dtype=wp.int32)  # manifolds of the body closing at the stage's start
     impact_pair_event: wp.array(dtype=wp.vec2)  # per pair: a member's (t*, e)
     impact_pair_acc: wp.array(dtype=wp.vec4)  # per pair: a member's compression impulse at each point
+    impact_member_list: wp.array(dtype=wp.int32)  # the members, for the slab schedule (joint_phase_in_order)
 
 
 @wp.struct
