@@ -12,11 +12,11 @@ the median).  Writes
 
     python bench/simultaneous_impacts.py           # about 3 minutes on 2 cores
     python bench/simultaneous_impacts.py --quick   # the seam only (a smoke run)
-    python bench/simultaneous_impacts.py --depth-seeds 16 28   # about 13 minutes
+    python bench/simultaneous_impacts.py --depth-seeds 16 25   # about 15 minutes
 
-``--depth-seeds FIRST LAST`` instead runs the mixed rain for 5 s under both models with each seed,
-probing the deepest body-body penetration after every step (as bench/audit.py's check, whose goal
-is 1 cm), and writes ``simultaneous_impacts_depth.csv``/``.json``.
+``--depth-seeds FIRST LAST`` instead runs the mixed rain and the audit's plate rain for 5 s under
+both models with each seed, probing the deepest body-body penetration after every step (as
+bench/audit.py's check, whose goal is 1 cm), and writes ``simultaneous_impacts_depth.csv``/``.json``.
 """
 
 from __future__ import annotations
@@ -69,17 +69,21 @@ def rain_step_ms(model: str, schedule: str) -> float:
 def depth_seeds(first: int, last: int, out_dir: Path) -> int:
     from bench.audit_stacks import rain_depth, thin_box_rains
 
-    mixed, _ = thin_box_rains()
+    mixed, plates = thin_box_rains()
     rows = []
     for seed in range(first, last + 1):
+        for rain, base in (("mixed_rain.toml", mixed), ("plates 6 x 10 x 6", plates)):
+            for model in MODELS:
+                scene = {**base, "sim": {**base["sim"], "seed": seed, "simultaneous_impacts": model}}
+                deepest, _ = rain_depth(scene, 5.0, 1)
+                rows.append({"rain": rain, "seed": seed, "simultaneous_impacts": model,
+                             "deepest_body_body_mm": round(1e3 * deepest, 2)})
+                print(f"{rain:18s} seed {seed:3d} {model:10s} deepest body-body {1e3 * deepest:.2f} mm", flush=True)
+    for rain in ("mixed_rain.toml", "plates 6 x 10 x 6"):
         for model in MODELS:
-            scene = {**mixed, "sim": {**mixed["sim"], "seed": seed, "simultaneous_impacts": model}}
-            deepest, _ = rain_depth(scene, 5.0, 1)
-            rows.append({"seed": seed, "simultaneous_impacts": model, "deepest_body_body_mm": round(1e3 * deepest, 2)})
-            print(f"seed {seed:3d} {model:10s} deepest body-body {1e3 * deepest:.2f} mm", flush=True)
-    for model in MODELS:
-        depths = [r["deepest_body_body_mm"] for r in rows if r["simultaneous_impacts"] == model]
-        print(f"{model:10s} mean {statistics.mean(depths):.2f} mm, max {max(depths):.2f} mm over {len(depths)} seeds")
+            depths = [r["deepest_body_body_mm"] for r in rows if r["simultaneous_impacts"] == model and r["rain"] == rain]
+            print(f"{rain:18s} {model:10s} mean {statistics.mean(depths):.2f} mm, max {max(depths):.2f} mm over "
+                  f"{len(depths)} seeds")
     common.write_rows("simultaneous_impacts_depth", rows, common.machine_info("cpu"), out_dir)
     return 0
 

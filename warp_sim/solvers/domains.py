@@ -228,4 +228,3 @@ def domain_sweep(
                 integrate_body(i, model, settings, state_in, solver, state_out)
             if finalize != 0:
                 finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
-
