@@ -46,7 +46,8 @@ import warp as wp
 from ..kernel_args import BodyModel, PairContacts, TerrainContacts
 from ..schedule.coloring import color_range
 from .impact import CLOSING, IMPACT_INNER, NOT_MEMBER, OTHER_EVENT, unchanged_since
-from .impact_pair import compress_pair, pair_engagement, pair_impact_friction, pair_manifold_at, restitute_pair
+from .impact_pair import (PairManifold, compress_pair, pair_engagement, pair_impact_friction, pair_manifold_at,
+                          restitute_pair)
 from .impact_point import free_fall_share
 from .impact_terrain import IMPACT_SPEED_TOLERANCE, NOT_ENGAGED, compress_terrain, restitute_terrain, terrain_engagement
 from .solver_args import JointImpacts, SolverBodies, StepSettings
@@ -74,6 +75,88 @@ def shares_a_body(i: int, j: int, joint: JointImpacts) -> bool:
     """Whether a closing manifold of bodies i and j shares a dynamic body with another: only then
     does the joint phase differ from the sequential one, which takes the others (impact.py)."""
     return wp.max(joint.impact_member_count[i], joint.impact_member_count[j]) >= 2
+
+
+@wp.func
+def gravity_by(i: int, toi: float, model: BodyModel, settings: StepSettings, solver: SolverBodies) -> wp.vec3:
+    """What gravity has added to body i's velocity by t* (its share its contacts do not hold)."""
+    return (free_fall_share(model.body_inv_mass[i], solver.solver_support[i]) * toi) * settings.gravity
+
+
+@wp.func(inline=True)
+def member_at(
+    p: int,
+    toi: float,
+    acc: wp.vec4,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in
+    solver: SolverBodies,
+    joint: JointImpacts,
+) -> PairManifold:
+    """Member p's rows at its t*, at the pose the stage's start velocities carry the bodies to, with
+    its impulses ``acc`` and the bodies' current velocities grown by gravity by t* (the impact acts
+    there, as impact.impact_pair_velocity's)."""
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    m = pair_manifold_at(p, toi, model, pairs, solver, joint.impact_v_start[i], joint.impact_w_start[i],
+                         joint.impact_v_start[j], joint.impact_w_start[j], solver.solver_drift_p[i],
+                         solver.solver_drift_p[j], acc)
+    m.vi = solver.solver_v[i] + gravity_by(i, toi, model, settings, solver)
+    m.wi = solver.solver_w[i]
+    m.vj = solver.solver_v[j] + gravity_by(j, toi, model, settings, solver)
+    m.wj = solver.solver_w[j]
+    return m
+
+
+@wp.func(inline=True)
+def store_member(
+    p: int,
+    toi: float,
+    m: PairManifold,
+    stamp: bool,
+    last_event: bool,
+    impact_sweep: int,
+    # Model
+    model: BodyModel,
+    # Settings
+    settings: StepSettings,
+    # Contacts in
+    pairs: PairContacts,
+    # Solver in/out
+    solver: SolverBodies,
+):
+    """Member p's new velocities (less gravity by t*) and position shifts t* dv on its dynamic bodies
+    (a static body may sit in many pairs of one colour); with ``stamp`` the sweep's stamp, with
+    ``last_event`` the pair as each one's last event (impact.pair_event_start)."""
+    ij = pairs.pair_body[p]
+    i = ij[0]
+    j = ij[1]
+    if model.body_inv_mass[i] > 0.0:
+        gi = gravity_by(i, toi, model, settings, solver)
+        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * ((solver.solver_v[i] + gi) - m.vi)
+        solver.solver_v[i] = m.vi - gi
+        solver.solver_w[i] = m.wi
+        if stamp:
+            solver.solver_impact_stamp[i] = impact_sweep
+        if last_event:
+            solver.solver_event_time[i] = toi
+            solver.solver_event_partner[i] = j
+    if model.body_inv_mass[j] > 0.0:
+        gj = gravity_by(j, toi, model, settings, solver)
+        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + toi * ((solver.solver_v[j] + gj) - m.vj)
+        solver.solver_v[j] = m.vj - gj
+        solver.solver_w[j] = m.wj
+        if stamp:
+            solver.solver_impact_stamp[j] = impact_sweep
+        if last_event:
+            solver.solver_event_time[j] = toi
+            solver.solver_event_partner[j] = i
 
 
 @wp.func(inline=False)
@@ -110,16 +193,11 @@ def joint_pair(
     if impact_since < 0 and not shares_a_body(i, j, joint):
         joint.impact_pair_event[p] = NOT_MEMBER
         return 0
-    vsi = joint.impact_v_start[i]
-    wsi = joint.impact_w_start[i]
-    vsj = joint.impact_v_start[j]
-    wsj = joint.impact_w_start[j]
-    dpi = solver.solver_drift_p[i]
-    dpj = solver.solver_drift_p[j]
     acc = wp.vec4(NOT_ENGAGED)
     if impact_since < 0:
-        engagement = pair_engagement(p, model, settings, pairs, solver, vsi, wsi, vsj, wsj, inv_mi, inv_mj, dpi, dpj,
-                                     0.0)
+        engagement = pair_engagement(p, model, settings, pairs, solver, joint.impact_v_start[i], joint.impact_w_start[i],
+                                     joint.impact_v_start[j], joint.impact_w_start[j], inv_mi, inv_mj,
+                                     solver.solver_drift_p[i], solver.solver_drift_p[j], 0.0)
         if engagement.hit == 0:
             joint.impact_pair_event[p] = NOT_MEMBER
             return 0
@@ -133,35 +211,15 @@ def joint_pair(
             return 0
         acc = joint.impact_pair_acc[p]
     toi = event[0]
-    m = pair_manifold_at(p, toi, model, pairs, solver, vsi, wsi, vsj, wsj, dpi, dpj, acc)
-    gi = (free_fall_share(inv_mi, solver.solver_support[i]) * toi) * settings.gravity
-    gj = (free_fall_share(inv_mj, solver.solver_support[j]) * toi) * settings.gravity
-    m.vi = solver.solver_v[i] + gi
-    m.wi = solver.solver_w[i]
-    m.vj = solver.solver_v[j] + gj
-    m.wj = solver.solver_w[j]
+    m = member_at(p, toi, acc, model, settings, pairs, solver, joint)
     before = m.acc
-    vi_in = m.vi
-    vj_in = m.vj
     m = compress_pair(m, count, inv_mi, inv_mj, solver.solver_inv_inertia[i], solver.solver_inv_inertia[j])
     joint.impact_pair_acc[p] = m.acc
     moved = float(0.0)  # the most normal speed this visit changed at a point (the stamp's test)
     for k in range(count):
         moved = wp.max(moved, (inv_mi + inv_mj) * wp.abs(m.acc[k] - before[k]))
     stamp = impact_since < 0 or moved >= IMPACT_SPEED_TOLERANCE
-    # only dynamic bodies are written: a static body may sit in many pairs of one colour
-    if inv_mi > 0.0:
-        solver.solver_v[i] = m.vi - gi
-        solver.solver_w[i] = m.wi
-        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (vi_in - m.vi)
-        if stamp:
-            solver.solver_impact_stamp[i] = impact_sweep
-    if inv_mj > 0.0:
-        solver.solver_v[j] = m.vj - gj
-        solver.solver_w[j] = m.wj
-        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + toi * (vj_in - m.vj)
-        if stamp:
-            solver.solver_impact_stamp[j] = impact_sweep
+    store_member(p, toi, m, stamp, False, impact_sweep, model, settings, pairs, solver)
     return wp.where(stamp, 1, 0)
 
 
@@ -194,35 +252,12 @@ def bounce_pair(
     inv_ij = solver.solver_inv_inertia[j]
     toi = event[0]
     e = event[1]
-    m = pair_manifold_at(p, toi, model, pairs, solver, joint.impact_v_start[i], joint.impact_w_start[i],
-                         joint.impact_v_start[j], joint.impact_w_start[j], solver.solver_drift_p[i],
-                         solver.solver_drift_p[j], joint.impact_pair_acc[p])
-    gi = (free_fall_share(inv_mi, solver.solver_support[i]) * toi) * settings.gravity
-    gj = (free_fall_share(inv_mj, solver.solver_support[j]) * toi) * settings.gravity
-    m.vi = solver.solver_v[i] + gi
-    m.wi = solver.solver_w[i]
-    m.vj = solver.solver_v[j] + gj
-    m.wj = solver.solver_w[j]
-    vi_in = m.vi
-    vj_in = m.vj
+    m = member_at(p, toi, joint.impact_pair_acc[p], model, settings, pairs, solver, joint)
     m = restitute_pair(m, count, e, inv_mi, inv_mj, inv_ii, inv_ij)
     mu = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     if mu > 0.0:
         m = pair_impact_friction(m, count, e, mu, inv_mi, inv_mj, inv_ii, inv_ij)
-    if inv_mi > 0.0:
-        solver.solver_v[i] = m.vi - gi
-        solver.solver_w[i] = m.wi
-        solver.solver_toi_shift[i] = solver.solver_toi_shift[i] + toi * (vi_in - m.vi)
-        solver.solver_impact_stamp[i] = impact_sweep
-        solver.solver_event_time[i] = toi
-        solver.solver_event_partner[i] = j
-    if inv_mj > 0.0:
-        solver.solver_v[j] = m.vj - gj
-        solver.solver_w[j] = m.wj
-        solver.solver_toi_shift[j] = solver.solver_toi_shift[j] + toi * (vj_in - m.vj)
-        solver.solver_impact_stamp[j] = impact_sweep
-        solver.solver_event_time[j] = toi
-        solver.solver_event_partner[j] = i
+    store_member(p, toi, m, True, True, impact_sweep, model, settings, pairs, solver)
     return 1
 
 
