@@ -4,8 +4,8 @@ After Box2D v3's solver stages (one list, consumed by each scheduler).  One subs
 
     [impact begin, pair contact times,                                 only with impacts
      JOINT_ROUNDS compression rounds and one bounce sweep of the impacts closing at the start
-     (impact_joint.py), IMPACT_SWEEPS rounds of sequential impact sweeps (impact.py),
-     after-impacts hook]
+     (impact_joint.py; the slab schedule runs them as one launch at the first round),
+     IMPACT_SWEEPS rounds of sequential impact sweeps (impact.py), after-impacts hook]
     prepare, warm start
     `iterations` solve sweeps (soft bias)
     integrate
