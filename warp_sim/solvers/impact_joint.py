@@ -387,13 +387,15 @@ def bounce_terrain_body(
 
 
 @wp.func
-def takes_part(event: wp.vec2, phase: int, impact_since: int) -> bool:
-    """Whether a manifold with this event has work in a sweep of the joint or bounce phase: its
-    first sweep looks at the closing ones, the later sweeps and the bounce at the members.  Read
-    before the visit, which is not inlined: the joint functions inlined into the sweep kernels
-    slowed every mode of them (the slab kernel's sequential impact sweeps by 80 %)."""
+def pair_takes_part(event: wp.vec2, phase: int, impact_since: int) -> bool:
+    """Whether a pair with this event has work in a sweep of the joint phase or its bounce: the
+    phase's first sweep looks at the closing pairs (impact.pair_contact_times marked them), the
+    later sweeps and the bounce at the members.  Read before the visit, which is not inlined: the
+    joint functions inlined into the sweep kernels slowed every mode of them (the slab kernel's
+    sequential impact sweeps by 80 %).  A body's terrain manifold needs no such test beyond
+    ``event[0] >= 0``: mark_terrain_member gives a closing one its t* at once."""
     if phase == IMPACT_JOINT and impact_since < 0:
-        return event[0] == CLOSING[0] or event[0] >= 0.0
+        return event[0] == CLOSING[0]
     return event[0] >= 0.0
 
 
@@ -415,7 +417,7 @@ def joint_phase_pair(
 ) -> int:
     """Pair p in a sweep of the joint phase (IMPACT_JOINT) or its bounce (IMPACT_BOUNCE); 1 where it
     changed its bodies (stamped them)."""
-    if not takes_part(joint.impact_pair_event[p], phase, impact_since):
+    if not pair_takes_part(joint.impact_pair_event[p], phase, impact_since):
         return 0
     if phase == IMPACT_JOINT:
         return joint_pair(p, model, settings, pairs, solver, joint, impact_sweep, impact_since)
@@ -442,7 +444,7 @@ def terrain_joint_impact(
     """Each body's terrain manifold in a sweep of the joint phase (IMPACT_JOINT) or its bounce, on
     the colour schedule (joint_phase_in_order takes them on the slab schedule)."""
     i = wp.tid() + tid_offset
-    if not takes_part(joint.impact_terrain_event[i], IMPACT_BOUNCE, impact_since):
+    if joint.impact_terrain_event[i][0] < 0.0:
         return
     if phase == IMPACT_JOINT:
         joint_terrain_body(i, model, settings, slots, solver, joint, impact_sweep, impact_since)
@@ -513,13 +515,13 @@ def joint_phase_in_order(
         mark_terrain_member(i, model, settings, slots, solver, joint)
     count = int(0)
     for i in range(body_count):
-        if takes_part(joint.impact_terrain_event[i], IMPACT_JOINT, -1):
+        if joint.impact_terrain_event[i][0] >= 0.0:
             joint_terrain_body(i, model, settings, slots, solver, joint, 0, -1)
             if joint.impact_terrain_event[i][0] >= 0.0:
                 joint.impact_member_list[count] = -(i + 1)
                 count += 1
     for p in range(pair_count[0]):
-        if takes_part(joint.impact_pair_event[p], IMPACT_JOINT, -1):
+        if pair_takes_part(joint.impact_pair_event[p], IMPACT_JOINT, -1):
             joint_pair(p, model, settings, pairs, solver, joint, 0, -1)
             if joint.impact_pair_event[p][0] >= 0.0:
                 joint.impact_member_list[count] = p

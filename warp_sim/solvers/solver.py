@@ -298,26 +298,31 @@ class SoftStepSolver:
                device=self.device)
 
     def _impact_sweep(self, m, a, pairs, color_sizes, stage):
-        """One impact round's sweeps (plan.impact_round_sweeps) in its phase (``stage.mode``): every
-        body's terrain impact, then the pairs' (colour by colour), numbered so that manifolds no
-        impact has touched since are skipped (plan.impact_first_since)."""
+        """One impact round's sweeps (plan.impact_round_sweeps): every body's terrain impact, then the
+        pairs' (colour by colour), numbered so that manifolds no impact has touched since are
+        skipped (plan.impact_first_since).  The joint phase's rounds go to _joint_sweep."""
         for u in range(impact_round_sweeps(stage)):
             sweep = stage.index * IMPACT_INNER + u
             since = impact_first_since(stage, sweep - 1) if u == 0 else sweep - 1
-            if stage.mode == MODE_IMPACT:
-                launch(terrain_impact, m.body_count, key=self,
-                       inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
-                pairs(stage.mode, sweep, since)
+            if stage.mode in JOINT_MODES:
+                self._joint_sweep(m, a, color_sizes, stage.mode, sweep, since)
                 continue
-            launch(terrain_joint_impact, m.body_count, key=self,
-                   inputs=[stage.mode, a.model, a.settings, a.slots, a.solver, a.joint, sweep, since], device=self.device)
-            c = a.contacts
-            # the overflow pairs take their impacts in sequence only (impact_joint.py)
-            for color, size in enumerate(color_sizes[:COLOR_COUNT]):
-                if size:
-                    launch(pair_joint_pass, size, key=self, inputs=[
-                        stage.mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings,
-                        a.pairs, a.solver, a.joint], device=self.device)
+            launch(terrain_impact, m.body_count, key=self,
+                   inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
+            pairs(stage.mode, sweep, since)
+
+    def _joint_sweep(self, m, a, color_sizes, mode: int, sweep: int, since: int):
+        """One sweep of the joint phase or its bounce on the colour schedule (impact_joint.py): the
+        bodies' terrain members, then the member pairs colour by colour; the overflow pairs take
+        their impacts in sequence only."""
+        c = a.contacts
+        launch(terrain_joint_impact, m.body_count, key=self,
+               inputs=[mode, a.model, a.settings, a.slots, a.solver, a.joint, sweep, since], device=self.device)
+        for color, size in enumerate(color_sizes[:COLOR_COUNT]):
+            if size:
+                launch(pair_joint_pass, size, key=self, inputs=[
+                    mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
+                    a.solver, a.joint], device=self.device)
 
     def _step_staged(self, model, contacts, a, color_sizes, fresh_contacts, domains=None, after_impacts=None):
         if domains is not None:
@@ -434,13 +439,6 @@ class SoftStepSolver:
                     return -1
                 return impact_first_since(impact, ((2 * impact_round - 2 + boundary) + 1) * IMPACT_INNER - 1)
 
-            if mode in JOINT_MODES:
-                # the whole joint phase in one launch at its first round (impact_joint.joint_phase_in_order)
-                if impact is not None and impact.index == 0:
-                    launch(joint_phase_in_order, 1, [m.body_count, a.model, a.settings, a.slots, a.contacts.pair_count,
-                                                     a.pairs, a.solver, a.joint], dev,
-                           key=self._site(state_in, "joint"), min_chunk=1)
-                return
             launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
                                                   impact_round, since(0), int(m.has_mass_ratio), *shared], dev,
                    key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize, impact_round),
@@ -471,6 +469,12 @@ class SoftStepSolver:
                 # its own launch: the pairs' contact times read every body's impact velocities
                 self._impact_begin(m, a, fresh_contacts)
                 self._pair_contact_times(a)
+            elif kind == IMPACT and stage.mode in JOINT_MODES:
+                # the whole joint phase, one launch at its first round (impact_joint.joint_phase_in_order)
+                if stage.index == 0:
+                    launch(joint_phase_in_order, 1, [m.body_count, a.model, a.settings, a.slots, a.contacts.pair_count,
+                                                     a.pairs, a.solver, a.joint], dev,
+                           key=self._site(state_in, "joint"), min_chunk=1)
             elif kind == IMPACT:
                 sweep(stage.mode, stage.reverse, impact=stage)
             elif kind == AFTER_IMPACTS:
