@@ -86,8 +86,13 @@ def timed_launch(kernel, dim, inputs, device, *args, **kwargs):
     t0 = time.perf_counter()
     plain_launch(kernel, dim, inputs, device, *args, **kwargs)
     name = kernel.key
+    mode = None
     if name == "domain_sweep":  # arguments (tid_offset,) first_domain, domain_count, mode, ...
         mode = inputs[2]
+    elif name.startswith("domain_sweep_"):  # one kernel per mode since the modes were specialised
+        mode = {"solve": MODE_SOLVE, "relax": pair_solve.MODE_RELAX,
+                "relax_closed": pair_solve.MODE_RELAX}.get(name[len("domain_sweep_"):], -1)
+    if mode is not None:
         name = "solve sweeps" if mode == MODE_SOLVE else "relax sweeps" if mode in relax_modes else "other sweeps"
     stage_s[name] = stage_s.get(name, 0.0) + time.perf_counter() - t0
 for info in pkgutil.walk_packages(warp_sim.__path__, "warp_sim."):

@@ -46,7 +46,7 @@ def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overla
     if overlap > 0.0 and schedule == "colors":
         # the walk to the ground, a launch of its own, for a pair its relax flagged
         assert walked > 0 and check.checked.get("chain_pass", 0) > 0
-    assert check.isolated.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
+    assert check.isolated.get("pair_pass_solve" if schedule == "colors" else "domain_sweep_solve", 0) > 0
     # the neighbour-timer gather and the wake marks use atomics, so they run as one launch, never
     # split (launch.py); the slab schedule colours no pairs
     kernels = ["collide_terrain", "collide_pairs", "carry_pair_impulses", "store_pairs", "update_sleep", "wake_marked"]
@@ -60,7 +60,12 @@ def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overla
             kernels.append("chain_pass")  # the heavy-on-light passes, a launch of their own
     for kernel in kernels:
         assert check.checked.get(kernel, 0) > 0, kernel
-    assert check.checked.get("pair_pass" if schedule == "colors" else "domain_sweep", 0) > 0
+    # the sweeps are one kernel per mode (solvers/domains.py, pair_solve.py); this restitution runs its impacts and
+    # relaxes closed contacts only
+    sweeps = [("pair_pass_" if schedule == "colors" else "domain_sweep_") + mode
+              for mode in ("impact", "solve", "relax_closed")]
+    for kernel in sweeps:
+        assert check.checked.get(kernel, 0) > 0, kernel
 
 
 def test_terrain_only_fused_step_has_no_races():

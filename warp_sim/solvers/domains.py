@@ -99,132 +99,150 @@ def solve_pair_in_slab(
         relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
 
 
-@wp.kernel
-def domain_sweep(
-    tid_offset: int,
-    first_domain: int,
-    domain_count: int,
-    mode: int,
-    reverse: int,
-    prepare: int,
-    integrate: int,
-    finalize: int,
-    impact_round: int,
-    impact_since: int,
-    has_mass_ratio: int,
-    # In
-    slabs: DomainSlabs,
-    # Model
-    model: BodyModel,
-    # Settings
-    settings: StepSettings,
-    reset_reference: int,
-    make_rows: int,
-    from_impact: int,
-    # State in
-    state_in: BodyState,
-    # Contacts in/out
-    slots: TerrainContacts,
-    pairs: PairContacts,
-    # Solver in/out
-    solver: SolverBodies,
-    # State out
-    state_out: BodyState,
-    # Out
-    bad_steps: BadSteps,
-):
-    """One sweep of one slab (d < domain_count: its bodies' terrain contacts, then its pairs) or of
-    the boundary pairs (d == domain_count), in the pair_solve mode ``mode``; ``reverse`` walks the
-    same sequence backwards (symmetric Gauss-Seidel, see the module docstring).
+# One kernel per sweep mode, the mode a compile-time constant.  A kernel taking the mode as an
+# argument carries every mode's code (impacts, the relax's walks, the warm start) into each sweep,
+# and the compiler, unable to drop any of it, lays out registers and stack for all of it; with the
+# mode fixed the other modes' branches fold away.  Same arithmetic, so the same results bit for
+# bit; the solve sweeps of the 10k rain run faster (bench/results/versions_sweep_modes.*, README).
+MODE_NAMES = {MODE_WARM_START: "warm_start", MODE_SOLVE: "solve", MODE_RELAX: "relax",
+              MODE_RELAX_CLOSED: "relax_closed", MODE_IMPACT: "impact"}
 
-    The per-body stages ride on the sweeps (see the module docstring): with ``prepare`` a slab
-    thread first prepares its bodies (prepare_body) and applies the warm start of its pairs and
-    of its side of the boundary pairs; with ``integrate`` or ``finalize`` it integrates or
-    finalizes, after its sweep, its bodies that no boundary pair touches, and the boundary thread
-    the others after the boundary sweep.  d == domain_count + 1 runs all three stages for the
-    static bodies."""
-    d = first_domain + wp.tid() + tid_offset
-    if d > domain_count:
-        # the static bodies (listed after the slabs), before any sweep: the sweeps read their solver
-        # state but never write it, and no slab owns them
-        first = slabs.domain_body_start[domain_count]
-        for k in range(slabs.domain_body_start[domain_count + 1] - first):
-            i = slabs.domain_body[first + k]
-            prepare_body(i, model, settings, reset_reference, make_rows, from_impact, state_in, slots, solver)
-            integrate_body(i, model, settings, state_in, solver, state_out)
-            finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
-        return
-    pair_first = slabs.domain_pair_start[d]
-    pair_count = slabs.domain_pair_start[d + 1] - pair_first
-    if d == domain_count:
-        # impacts: IMPACT_INNER sweeps a launch, numbered after the slabs' of the same round
+
+def domain_sweep_for(mode: int):
+    """The slab sweep of pair_solve mode ``mode`` (one of MODE_NAMES)."""
+
+    @wp.kernel(name="domain_sweep_" + MODE_NAMES[mode])
+    def domain_sweep(
+        tid_offset: int,
+        first_domain: int,
+        domain_count: int,
+        reverse: int,
+        prepare: int,
+        integrate: int,
+        finalize: int,
+        impact_round: int,
+        impact_since: int,
+        has_mass_ratio: int,
+        # In
+        slabs: DomainSlabs,
+        # Model
+        model: BodyModel,
+        # Settings
+        settings: StepSettings,
+        reset_reference: int,
+        make_rows: int,
+        from_impact: int,
+        # State in
+        state_in: BodyState,
+        # Contacts in/out
+        slots: TerrainContacts,
+        pairs: PairContacts,
+        # Solver in/out
+        solver: SolverBodies,
+        # State out
+        state_out: BodyState,
+        # Out
+        bad_steps: BadSteps,
+    ):
+        """One sweep of one slab (d < domain_count: its bodies' terrain contacts, then its pairs) or of
+        the boundary pairs (d == domain_count), in the pair_solve mode ``mode`` (fixed at compile
+        time); ``reverse`` walks the same sequence backwards (symmetric Gauss-Seidel, see the module
+        docstring).
+
+        The per-body stages ride on the sweeps (see the module docstring): with ``prepare`` a slab
+        thread first prepares its bodies (prepare_body) and applies the warm start of its pairs and
+        of its side of the boundary pairs; with ``integrate`` or ``finalize`` it integrates or
+        finalizes, after its sweep, its bodies that no boundary pair touches, and the boundary thread
+        the others after the boundary sweep.  d == domain_count + 1 runs all three stages for the
+        static bodies."""
+        d = first_domain + wp.tid() + tid_offset
+        if d > domain_count:
+            # the static bodies (listed after the slabs), before any sweep: the sweeps read their solver
+            # state but never write it, and no slab owns them
+            first = slabs.domain_body_start[domain_count]
+            for k in range(slabs.domain_body_start[domain_count + 1] - first):
+                i = slabs.domain_body[first + k]
+                prepare_body(i, model, settings, reset_reference, make_rows, from_impact, state_in, slots, solver)
+                integrate_body(i, model, settings, state_in, solver, state_out)
+                finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
+            return
+        pair_first = slabs.domain_pair_start[d]
+        pair_count = slabs.domain_pair_start[d + 1] - pair_first
+        if d == domain_count:
+            # impacts: IMPACT_INNER sweeps a launch, numbered after the slabs' of the same round
+            inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
+            for u in range(inner):
+                sweep = impact_sweep_number(impact_round, 1, u)
+                since = impact_sweep_since(impact_round, 1, u, impact_since)
+                direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
+                for q in range(pair_count):
+                    p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
+                    solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
+            for k in range(slabs.boundary_body_count[0]):
+                i = slabs.boundary_body[k]
+                if integrate != 0:
+                    integrate_body(i, model, settings, state_in, solver, state_out)
+                if finalize != 0:
+                    finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
+            return
+        body_first = slabs.domain_body_start[d]
+        body_count = slabs.domain_body_start[d + 1] - body_first
+        if prepare != 0:
+            for k in range(body_count):
+                prepare_body(slabs.domain_body[body_first + k], model, settings, reset_reference, make_rows,
+                             from_impact,
+                             state_in, slots, solver)
+            for k in range(pair_count):
+                solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0,
+                               -1)
+            # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
+            # boundary impulse applied after the first sweep let a stack split across two slabs sag
+            # 27 mm instead of 7)
+            boundary_first = slabs.domain_pair_start[domain_count]
+            for q in range(slabs.domain_pair_start[domain_count + 1] - boundary_first):
+                p = slabs.domain_pair[boundary_first + q]
+                ij = pairs.pair_body[p]
+                for side in range(2):
+                    if slabs.body_domain[ij[side]] == d:
+                        warm_start_pair_side(p, side, reset_reference, model, state_in, pairs, solver)
+        terrain = mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
+        use_bias = int(mode == MODE_SOLVE)
+        if mode == MODE_RELAX_CLOSED:
+            use_bias = -1
+        # forward: terrain, then pairs; backward: the same sequence walked from its end.  Impacts run
+        # IMPACT_INNER such sweeps a launch, alternating, so a chain of impacts inside a slab (a body
+        # falling on a pile) is carried through in one launch; sweep numbers let a manifold whose bodies
+        # no impact has changed since it was last taken be skipped (impact.unchanged_since)
         inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
         for u in range(inner):
-            sweep = impact_sweep_number(impact_round, 1, u)
-            since = impact_sweep_since(impact_round, 1, u, impact_since)
+            sweep = impact_sweep_number(impact_round, 0, u)
+            since = impact_sweep_since(impact_round, 0, u, impact_since)
             direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
-            for q in range(pair_count):
-                p = slabs.domain_pair[walk(pair_first, pair_count, q, direction)]
-                solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
-        for k in range(slabs.boundary_body_count[0]):
-            i = slabs.boundary_body[k]
-            if integrate != 0:
-                integrate_body(i, model, settings, state_in, solver, state_out)
-            if finalize != 0:
-                finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
-        return
-    body_first = slabs.domain_body_start[d]
-    body_count = slabs.domain_body_start[d + 1] - body_first
-    if prepare != 0:
-        for k in range(body_count):
-            prepare_body(slabs.domain_body[body_first + k], model, settings, reset_reference, make_rows,
-                         from_impact,
-                         state_in, slots, solver)
-        for k in range(pair_count):
-            solve_one_pair(slabs.domain_pair[pair_first + k], MODE_WARM_START, model, settings, pairs, solver, 0, -1)
-        # this slab's side of each boundary pair: before any sweep, like the pairs inside (a
-        # boundary impulse applied after the first sweep let a stack split across two slabs sag
-        # 27 mm instead of 7)
-        boundary_first = slabs.domain_pair_start[domain_count]
-        for q in range(slabs.domain_pair_start[domain_count + 1] - boundary_first):
-            p = slabs.domain_pair[boundary_first + q]
-            ij = pairs.pair_body[p]
-            for side in range(2):
-                if slabs.body_domain[ij[side]] == d:
-                    warm_start_pair_side(p, side, reset_reference, model, state_in, pairs, solver)
-    terrain = mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED
-    use_bias = int(mode == MODE_SOLVE)
-    if mode == MODE_RELAX_CLOSED:
-        use_bias = -1
-    # forward: terrain, then pairs; backward: the same sequence walked from its end.  Impacts run
-    # IMPACT_INNER such sweeps a launch, alternating, so a chain of impacts inside a slab (a body
-    # falling on a pile) is carried through in one launch; sweep numbers let a manifold whose bodies
-    # no impact has changed since it was last taken be skipped (impact.unchanged_since)
-    inner = wp.where(mode == MODE_IMPACT, IMPACT_INNER, 1)
-    for u in range(inner):
-        sweep = impact_sweep_number(impact_round, 0, u)
-        since = impact_sweep_since(impact_round, 0, u, impact_since)
-        direction = wp.where(u % 2 == 1, 1 - reverse, reverse)
-        for part in range(2):
-            if (part == 0) == (direction == 0):
-                if mode == MODE_IMPACT:
-                    for k in range(body_count):
-                        impact_terrain_body(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
-                                            settings, slots, solver, sweep, since)
-                elif terrain:
-                    for k in range(body_count):
-                        sweep_body_terrain(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
-                                           settings, use_bias, slots, solver)
-            else:
-                for k in range(pair_count):
-                    p = slabs.domain_pair[walk(pair_first, pair_count, k, direction)]
-                    solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
-    if integrate != 0 or finalize != 0:
-        for k in range(body_count):
-            i = slabs.domain_body[body_first + k]
-            if slabs.body_on_boundary[i] != 0:
-                continue  # a boundary pair moves it after this launch: the boundary thread does it
-            if integrate != 0:
-                integrate_body(i, model, settings, state_in, solver, state_out)
-            if finalize != 0:
-                finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
+            for part in range(2):
+                if (part == 0) == (direction == 0):
+                    if mode == MODE_IMPACT:
+                        for k in range(body_count):
+                            impact_terrain_body(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
+                                                settings, slots, solver, sweep, since)
+                    elif terrain:
+                        for k in range(body_count):
+                            sweep_body_terrain(slabs.domain_body[walk(body_first, body_count, k, direction)], model,
+                                               settings, use_bias, slots, solver)
+                else:
+                    for k in range(pair_count):
+                        p = slabs.domain_pair[walk(pair_first, pair_count, k, direction)]
+                        solve_pair_in_slab(p, mode, has_mass_ratio, model, settings, pairs, slots, solver, sweep, since)
+        if integrate != 0 or finalize != 0:
+            for k in range(body_count):
+                i = slabs.domain_body[body_first + k]
+                if slabs.body_on_boundary[i] != 0:
+                    continue  # a boundary pair moves it after this launch: the boundary thread does it
+                if integrate != 0:
+                    integrate_body(i, model, settings, state_in, solver, state_out)
+                if finalize != 0:
+                    finalize_body(i, model, settings, state_in, solver, state_out, bad_steps)
+
+    return domain_sweep
+
+
+DOMAIN_SWEEP = {mode: domain_sweep_for(mode) for mode in MODE_NAMES}

@@ -418,33 +418,43 @@ def warm_start_pair_side(
     solver.solver_w[b] = w
 
 
-@wp.kernel
-def pair_pass(
-    tid_offset: int,
-    mode: int,
-    impact_sweep: int,
-    impact_since: int,
-    color: int,
-    color_start: wp.array(dtype=wp.int32),
-    color_pairs_sorted: wp.array(dtype=wp.int32),
-    # Model
-    model: BodyModel,
-    # Settings
-    settings: StepSettings,
-    # Contacts in/out
-    pairs: PairContacts,
-    # Solver in/out
-    solver: SolverBodies,
-):
-    r = color_range(color, color_start, wp.tid() + tid_offset)
-    for index in range(r[0], r[1]):
-        p = color_pairs_sorted[index]
-        if mode == MODE_RELAX or mode == MODE_RELAX_CLOSED:
-            held = pair_normal_total(p, pairs)
-            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
-            pairs.pair_relax_chain[p] = relax_chain_needed(p, held, model, settings, pairs, solver)
-        else:
-            solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
+# One kernel per mode, the mode a compile-time constant (as domains.DOMAIN_SWEEP): with the mode an
+# argument, every mode's code, the impacts' included, set the registers of each sweep.
+PAIR_MODE_NAMES = {MODE_WARM_START: "warm_start", MODE_SOLVE: "solve", MODE_RELAX: "relax",
+                   MODE_RELAX_CLOSED: "relax_closed", MODE_IMPACT: "impact"}
+
+
+def pair_pass_for(mode: int):
+    """The colour sweep of pair_solve mode ``mode`` (one of PAIR_MODE_NAMES)."""
+
+    @wp.kernel(name="pair_pass_" + PAIR_MODE_NAMES[mode])
+    def pair_pass(
+        tid_offset: int,
+        impact_sweep: int,
+        impact_since: int,
+        color: int,
+        color_start: wp.array(dtype=wp.int32),
+        color_pairs_sorted: wp.array(dtype=wp.int32),
+        # Model
+        model: BodyModel,
+        # Settings
+        settings: StepSettings,
+        # Contacts in/out
+        pairs: PairContacts,
+        # Solver in/out
+        solver: SolverBodies,
+    ):
+        r = color_range(color, color_start, wp.tid() + tid_offset)
+        for index in range(r[0], r[1]):
+            p = color_pairs_sorted[index]
+            if mode == MODE_RELAX or mode == MODE_RELAX_CLOSED:
+                held = pair_normal_total(p, pairs)
+                solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
+                pairs.pair_relax_chain[p] = relax_chain_needed(p, held, model, settings, pairs, solver)
+            else:
+                solve_one_pair(p, mode, model, settings, pairs, solver, impact_sweep, impact_since)
+
+    return pair_pass
 
 
 @wp.func
@@ -584,3 +594,6 @@ def chain_pass(
             chain_pair(p, model, settings, pairs, slots, solver)
         elif pairs.pair_relax_chain[p] != 0:
             relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
+
+
+PAIR_PASS = {mode: pair_pass_for(mode) for mode in PAIR_MODE_NAMES}

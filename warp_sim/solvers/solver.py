@@ -18,13 +18,13 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainC
 from ..launch import LIGHT_CHUNK, gpu_blocks, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
-from .domains import domain_sweep
+from .domains import DOMAIN_SWEEP
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
 from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
 from .impact_joint import joint_phase_in_order, pair_joint_pass, terrain_joint_impact, terrain_members
 from .pair_overflow import OverflowPairs
 from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES,
-                         chain_pass, pair_pass)
+                         chain_pass, PAIR_PASS)
 from .plan import (AFTER_IMPACTS, FINALIZE, FIRST_SEQUENTIAL_ROUND, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX,
                    SOLVE, WARM_START, impact_first_since, impact_round_sweeps, substep_plan)
 from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, push_cap, soft_coefficients, soft_load, solve_and_integrate,
@@ -356,8 +356,8 @@ class SoftStepSolver:
                             a.solver], device=dev)
                     continue
                 dim = 1 if color == COLOR_COUNT else size
-                launch(pair_pass, dim, key=self, inputs=[
-                    mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
+                launch(PAIR_PASS[mode], dim, key=self, inputs=[
+                    sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
                     a.solver], device=dev)
                 # the heavy-on-light passes after a solve; after a relax the walk to the ground, which
                 # relax_passes = 1 never takes (pair_solve.relax_chain_needed)
@@ -439,18 +439,20 @@ class SoftStepSolver:
                     return -1
                 return impact_first_since(impact, ((2 * impact_round - 2 + boundary) + 1) * IMPACT_INNER - 1)
 
-            launch(domain_sweep, g.domain_count, [0, g.domain_count, mode, reverse, prepare, integrate, finalize,
-                                                  impact_round, since(0), int(m.has_mass_ratio), *shared], dev,
+            kernel = DOMAIN_SWEEP[mode]
+            launch(kernel, g.domain_count, [0, g.domain_count, reverse, prepare, integrate, finalize,
+                                            impact_round, since(0), int(m.has_mass_ratio), *shared], dev,
                    key=self._site(state_in, "slabs", mode, reverse, prepare, integrate, finalize, impact_round),
                    min_chunk=1)
             if g.boundary_pairs:
-                launch(domain_sweep, 1, [g.domain_count, g.domain_count, mode, reverse, 0, integrate, finalize,
-                                         impact_round, since(1), int(m.has_mass_ratio), *shared], dev,
+                launch(kernel, 1, [g.domain_count, g.domain_count, reverse, 0, integrate, finalize,
+                                   impact_round, since(1), int(m.has_mass_ratio), *shared], dev,
                        key=self._site(state_in, "boundary", mode, reverse, integrate, finalize, impact_round),
                        min_chunk=1)
 
         if g.static_bodies:
-            launch(domain_sweep, 1, [g.domain_count + 1, g.domain_count, 0, 0, 1, 1, 1, 0, -1, 0, *shared], dev,
+            launch(DOMAIN_SWEEP[MODE_WARM_START], 1, [g.domain_count + 1, g.domain_count, 0, 1, 1, 1, 0, -1, 0, *shared],
+                   dev,
                    key=self._site(state_in, "static"), min_chunk=1)
         plan = substep_plan(s.iterations, s.relax_iterations, impacts, self.joint_impacts)
         # the per-body stages ride on the sweeps next to them (module docstring of plan.py)
