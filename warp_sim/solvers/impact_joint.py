@@ -471,8 +471,10 @@ def pair_joint_pass(
     solver: SolverBodies,
     joint: JointImpacts,
 ):
-    """One colour's pairs in a sweep of the joint phase or its bounce (the colour schedule's
-    pair_solve.pair_pass, a kernel of its own as domains.domain_joint_sweep says why)."""
+    """One colour's pairs in a sweep of the joint phase or its bounce: the colour schedule's
+    pair_solve.pair_pass for the joint phase, a kernel of its own so that the joint code and its
+    JointImpacts arrays stay out of the sweeps every scene runs (compiled into the slab sweep, they
+    had slowed its other modes by half)."""
     r = color_range(color, color_start, wp.tid() + tid_offset)
     for index in range(r[0], r[1]):
         joint_phase_pair(color_pairs_sorted[index], phase, model, settings, pairs, solver, joint, impact_sweep, impact_since)
