@@ -159,7 +159,7 @@ def store_member(
             solver.solver_event_partner[j] = i
 
 
-@wp.func(inline=False)
+@wp.func
 def joint_pair(
     p: int,
     # Model
@@ -223,7 +223,7 @@ def joint_pair(
     return wp.where(stamp, 1, 0)
 
 
-@wp.func(inline=False)
+@wp.func
 def bounce_pair(
     p: int,
     # Model
@@ -261,7 +261,7 @@ def bounce_pair(
     return 1
 
 
-@wp.func(inline=False)
+@wp.func
 def joint_terrain_body(
     i: int,
     # Model
@@ -352,7 +352,7 @@ def terrain_members(
     mark_terrain_member(wp.tid() + tid_offset, model, settings, slots, solver, joint)
 
 
-@wp.func(inline=False)
+@wp.func
 def bounce_terrain_body(
     i: int,
     # Model
