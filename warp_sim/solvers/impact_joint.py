@@ -390,10 +390,10 @@ def bounce_terrain_body(
 def pair_takes_part(event: wp.vec2, phase: int, impact_since: int) -> bool:
     """Whether a pair with this event has work in a sweep of the joint phase or its bounce: the
     phase's first sweep looks at the closing pairs (impact.pair_contact_times marked them), the
-    later sweeps and the bounce at the members.  Read before the visit, which is not inlined: the
-    joint functions inlined into the sweep kernels slowed every mode of them (the slab kernel's
-    sequential impact sweeps by 80 %).  A body's terrain manifold needs no such test beyond
-    ``event[0] >= 0``: mark_terrain_member gives a closing one its t* at once."""
+    later sweeps and the bounce at the members; a pair outside the phase returns here.  The joint
+    functions live in kernels of their own: inlined into the sweep kernels, they slowed every mode
+    of them (the slab kernel's sequential impact sweeps by 80 %).  A body's terrain manifold needs
+    no such test beyond ``event[0] >= 0``: mark_terrain_member gives a closing one its t* at once."""
     if phase == IMPACT_JOINT and impact_since < 0:
         return event[0] == CLOSING[0]
     return event[0] >= 0.0
