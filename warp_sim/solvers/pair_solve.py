@@ -534,7 +534,7 @@ def relax_chain_needed(p: int, held: float, model: BodyModel, settings: StepSett
     return int(released >= RELAX_CHAIN_TOLERANCES * settings.convergence_tolerance)
 
 
-@wp.func(inline=False)
+@wp.func
 def relax_chain_pair(
     p: int,
     mode: int,
