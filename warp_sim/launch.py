@@ -43,6 +43,9 @@ LIGHT_CHUNK = 1 << 16  # for kernels of a few loads and stores a thread (cell ke
 #                        10k bodies one such launch ran 0.2 ms split in two, nearly all hand-off
 MIN_CHUNK = 4096  # below this a chunk costs more in thread hand-off than it saves (rain of 1k bodies:
 #                   43 steps/s on one thread, 38 split in two; 10k: 5.3 on one, 8.1 split)
+PAIR_CHUNK = 256  # for the colour schedule's pair sweeps, a pair's solve a thread: a few hundred pairs
+#                   outweigh a hand-off, and at MIN_CHUNK each colour of the 10k rain (600 to 1,500
+#                   pairs) ran on one core (its pair sweeps 12.4 ms a step on one, 9.4 split in two)
 
 BLOCKS_PER_SM = 8  # 2048 resident threads a multiprocessor at 256 a block: a full machine, no more
 _CPU_COUNT = os.cpu_count() or 1  # asked once: the call costs ~9 us, and launches ask per launch

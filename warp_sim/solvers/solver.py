@@ -15,7 +15,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts, bind
-from ..launch import LIGHT_CHUNK, gpu_blocks, launch
+from ..launch import LIGHT_CHUNK, PAIR_CHUNK, gpu_blocks, launch
 from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
 from .domains import DOMAIN_SWEEP
@@ -320,7 +320,7 @@ class SoftStepSolver:
                inputs=[mode, a.model, a.settings, a.slots, a.solver, a.joint, sweep, since], device=self.device)
         for color, size in enumerate(color_sizes[:COLOR_COUNT]):
             if size:
-                launch(pair_joint_pass, size, key=self, inputs=[
+                launch(pair_joint_pass, size, key=self, min_chunk=PAIR_CHUNK, inputs=[
                     mode, sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
                     a.solver, a.joint], device=self.device)
 
@@ -356,14 +356,14 @@ class SoftStepSolver:
                             a.solver], device=dev)
                     continue
                 dim = 1 if color == COLOR_COUNT else size
-                launch(PAIR_PASS[mode], dim, key=self, inputs=[
+                launch(PAIR_PASS[mode], dim, key=self, min_chunk=PAIR_CHUNK, inputs=[
                     sweep, since, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs,
                     a.solver], device=dev)
                 # the heavy-on-light passes after a solve; after a relax the walk to the ground, which
                 # relax_passes = 1 never takes (pair_solve.relax_chain_needed)
                 if (mode == MODE_SOLVE and m.has_mass_ratio) or (mode in RELAX_MODES and m.checkpoint_count > 0
                                                                 and s.relax_passes > 1):
-                    launch(chain_pass, dim, key=self, inputs=[
+                    launch(chain_pass, dim, key=self, min_chunk=PAIR_CHUNK, inputs=[
                         mode, color, c.color_start, c.color_pairs_sorted, a.model, a.settings, a.pairs, a.slots,
                         a.solver], device=dev)
 
