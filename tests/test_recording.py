@@ -229,6 +229,15 @@ def test_simulator_refuses_a_contact_capacity_it_cannot_allocate():
         Simulator(b.finalize("cpu"), SimConfig(contact_max=10**12))
 
 
+def _default_sigint():
+    """In the child: SIGINT back to its default action.  A test run started in the background of a
+    non-interactive shell (nohup ... &) inherits SIGINT ignored, Python then leaves it ignored, and
+    the Ctrl-C below would never arrive."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start_long_run(scene: Path, out: Path):
     import subprocess
     import sys
@@ -237,7 +246,7 @@ def _start_long_run(scene: Path, out: Path):
     env = {**os.environ, "PYTHONPATH": str(root)}
     return subprocess.Popen([sys.executable, "-m", "warp_sim", "run", str(scene), "--steps", "1000000", "--out",
                              str(out), "--quiet"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, preexec_fn=_default_sigint)
 
 
 def _wait_for_chunks(out: Path, proc, count: int = 1):
