@@ -38,3 +38,27 @@ def test_restoring_a_snapshot_replays_bit_for_bit(device):
     assert sim.step_count == 60
     sim.step(60)
     assert state_digest(sim) == first
+
+
+def test_the_colour_schedule_gives_the_same_state_on_any_cpu_thread_count(monkeypatch):
+    """The colour sweeps split a colour across the CPU threads once it holds launch.PAIR_CHUNK pairs
+    (a colour's pairs share no body, so the split must not change any result): a rain dense enough
+    that its colours pass that size gives one state on 1, 2 and 3 threads, with and without
+    restitution (its impact sweeps and joint phase split the same way)."""
+    import pytest
+
+    from warp_sim.launch import PAIR_CHUNK
+
+    for e in (0.0, 0.5):
+        digests = []
+        for threads in (1, 2, 3):
+            monkeypatch.setenv("WARP_SIM_CPU_THREADS", str(threads))
+            sim = cases.terrain_drop(2500, "mix", body_contact=True, spacing=0.7, seed=5, restitution=e,
+                                     pair_schedule="colors", sleep=False)
+            sim.step(20)
+            starts = sim.contacts.color_start.numpy()
+            if threads == 1:  # the colours are large enough to split, else this proves nothing
+                if int(np.diff(starts).max()) <= PAIR_CHUNK:
+                    pytest.fail(f"largest colour {int(np.diff(starts).max())} pairs, not over {PAIR_CHUNK}")
+            digests.append(state_digest(sim))
+        assert digests[0] == digests[1] == digests[2], e
