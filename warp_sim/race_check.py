@@ -30,7 +30,7 @@ import numpy as np
 import warp as wp
 
 from . import launch as launch_module
-from .solvers.domains import MODE_NAMES
+from .solvers.pair_solve import SWEEP_MODE_NAMES
 
 # kernel name -> parameters several threads may write (each writer stores the same value)
 SHARED_WRITES = {
@@ -38,7 +38,7 @@ SHARED_WRITES = {
     "finalize_bodies": {"bad_steps.bad_count"},
     "solve_and_integrate": {"bad_steps.bad_count"},
 }
-SHARED_WRITES.update({"domain_sweep_" + name: {"bad_steps.bad_count"} for name in MODE_NAMES.values()})
+SHARED_WRITES.update({"domain_sweep_" + name: {"bad_steps.bad_count"} for name in SWEEP_MODE_NAMES.values()})
 
 
 class RaceError(AssertionError):

@@ -36,9 +36,9 @@ import warp as wp
 
 from ..kernel_args import BadSteps, BodyModel, BodyState, PairContacts, TerrainContacts
 from .impact import IMPACT_INNER, impact_terrain_body
-from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START, chain_pair,
-                         pair_normal_total, relax_chain_needed, relax_chain_pair, solve_one_pair,
-                         warm_start_pair_side)
+from .pair_solve import (MODE_IMPACT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE, MODE_WARM_START,
+                         SWEEP_MODE_NAMES, chain_pair, pair_normal_total, relax_chain_needed, relax_chain_pair,
+                         solve_one_pair, warm_start_pair_side)
 from .solver_args import DomainSlabs, SolverBodies, StepSettings
 from .staged import finalize_body, integrate_body, prepare_body, sweep_body_terrain
 
@@ -104,14 +104,12 @@ def solve_pair_in_slab(
 # and the compiler, unable to drop any of it, lays out registers and stack for all of it; with the
 # mode fixed the other modes' branches fold away.  Same arithmetic, so the same results bit for
 # bit; the solve sweeps of the 10k rain run faster (bench/results/versions_sweep_modes.*, README).
-MODE_NAMES = {MODE_WARM_START: "warm_start", MODE_SOLVE: "solve", MODE_RELAX: "relax",
-              MODE_RELAX_CLOSED: "relax_closed", MODE_IMPACT: "impact"}
 
 
 def domain_sweep_for(mode: int):
-    """The slab sweep of pair_solve mode ``mode`` (one of MODE_NAMES)."""
+    """The slab sweep of pair_solve mode ``mode`` (one of pair_solve.SWEEP_MODE_NAMES)."""
 
-    @wp.kernel(name="domain_sweep_" + MODE_NAMES[mode])
+    @wp.kernel(name="domain_sweep_" + SWEEP_MODE_NAMES[mode])
     def domain_sweep(
         tid_offset: int,
         first_domain: int,
@@ -245,4 +243,4 @@ def domain_sweep_for(mode: int):
     return domain_sweep
 
 
-DOMAIN_SWEEP = {mode: domain_sweep_for(mode) for mode in MODE_NAMES}
+DOMAIN_SWEEP = {mode: domain_sweep_for(mode) for mode in SWEEP_MODE_NAMES}

@@ -418,16 +418,17 @@ def warm_start_pair_side(
     solver.solver_w[b] = w
 
 
-# One kernel per mode, the mode a compile-time constant (as domains.DOMAIN_SWEEP): with the mode an
-# argument, every mode's code, the impacts' included, set the registers of each sweep.
-PAIR_MODE_NAMES = {MODE_WARM_START: "warm_start", MODE_SOLVE: "solve", MODE_RELAX: "relax",
-                   MODE_RELAX_CLOSED: "relax_closed", MODE_IMPACT: "impact"}
+# The modes a sweep kernel is compiled for, one kernel each (this module's PAIR_PASS and the slab
+# schedule's domains.DOMAIN_SWEEP), by the name that ends the kernel's: with the mode a
+# compile-time constant the other modes' branches fold away (domains.py says what that bought).
+SWEEP_MODE_NAMES = {MODE_WARM_START: "warm_start", MODE_SOLVE: "solve", MODE_RELAX: "relax",
+                    MODE_RELAX_CLOSED: "relax_closed", MODE_IMPACT: "impact"}
 
 
 def pair_pass_for(mode: int):
-    """The colour sweep of pair_solve mode ``mode`` (one of PAIR_MODE_NAMES)."""
+    """The colour sweep of pair_solve mode ``mode`` (one of SWEEP_MODE_NAMES)."""
 
-    @wp.kernel(name="pair_pass_" + PAIR_MODE_NAMES[mode])
+    @wp.kernel(name="pair_pass_" + SWEEP_MODE_NAMES[mode])
     def pair_pass(
         tid_offset: int,
         impact_sweep: int,
@@ -596,4 +597,4 @@ def chain_pass(
             relax_chain_pair(p, mode, model, settings, pairs, slots, solver)
 
 
-PAIR_PASS = {mode: pair_pass_for(mode) for mode in PAIR_MODE_NAMES}
+PAIR_PASS = {mode: pair_pass_for(mode) for mode in SWEEP_MODE_NAMES}
