@@ -76,6 +76,9 @@ class SimConfig:
     sleep_velocity: float = 0.05
     sleep_time: float = 0.5
     speculative_margin: float = 0.02
+    # boxes on a Fourier terrain: the support face's checkpoints also see crests between them
+    # (collide/face_search.py); False: the checkpoints alone, faster, and blind to those crests
+    face_search: bool = True
     body_contact: bool = True
     broad_phase: str = "grid"
     contact_max: int = 0

@@ -44,6 +44,7 @@ class BodyModel:
     body_checkpoint_start: wp.array(dtype=wp.int32)
     body_checkpoint_count: wp.array(dtype=wp.int32)
     checkpoint_local: wp.array(dtype=wp.vec3)
+    body_checkpoint_cell: wp.array(dtype=wp.vec3)  # collide/face_search.py
 
 
 @wp.struct

@@ -26,6 +26,8 @@ class Model:
             the Coulomb mu actually used (1 - slipperiness under the thesis's friction model).
         body_checkpoint_start, body_checkpoint_count: the body's terrain contact slot range.
         checkpoint_body, checkpoint_local: per slot, its body and body-frame point [m].
+        body_checkpoint_cell: a box's checkpoint spacing halved, per body axis [m] (0 for a sphere):
+            the cell of its support face a checkpoint searches (collide/face_search.py).
         terrain_*: flat terrain description (see terrain.py).
 
     Bodies may be stored in another order than the scene's (``body_order``, body_order.py):
@@ -85,6 +87,10 @@ class Model:
         self.body_checkpoint_count = arr("body_checkpoint_count", wp.int32)
         self.checkpoint_body = arr("checkpoint_body", wp.int32)
         self.checkpoint_local = arr("checkpoint_local", wp.vec3)
+        # a box checkpoint's cell: half its lattice spacing along each body axis (collide/face_search.py)
+        per_edge = int(host.get("checkpoints_per_edge", 3))
+        cell = np.where((host["body_shape"] == 0)[:, None], 0.0, host["body_size"] / max(per_edge - 1, 1))
+        self.body_checkpoint_cell = wp.array(cell.astype(np.float32), dtype=wp.vec3, device=device)
         self.set_terrain(terrain)
 
     def set_terrain(self, terrain: Terrain):

@@ -193,7 +193,7 @@ class Simulator:
                 bind(BodyModel, m, m), bind(TerrainModel, m, m),
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-                int(refresh_spheres),
+                int(refresh_spheres), int(self.config.face_search),
                 # State in
                 bind(BodyState, state, state), self.solver.solver_ref_pos,
                 # Contacts

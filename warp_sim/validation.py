@@ -411,6 +411,7 @@ SIM_SCHEMA = {
     "convergence_tolerance": Number(ge=0),
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),
+    "face_search": Boolean(),
     "solver": Choice(SOLVERS),
     "sleep": Boolean(),
     "sleep_velocity": Number(gt=0),

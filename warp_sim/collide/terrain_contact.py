@@ -38,7 +38,9 @@ slot and the search below is unchanged.
 
 Boxes: the thesis's checkpoints.  A checkpoint p is compared with the
 surface directly below it: depth = (H(p.x, p.z) - p.y) n_y with n the unit normal from the
-gradient, the first-order distance to the surface (exact on planes).
+gradient, the first-order distance to the surface (exact on planes).  On the Fourier terrain the
+checkpoints of the face turned to the ground also see a crest between them (face_search.py,
+``SimConfig.face_search``).
 
 Most of a box's 26 checkpoints cannot reach the surface (those on its upper half, when it rests
 on a face), and each costs a 25-term Fourier evaluation.  One thread handles one body, samples
@@ -70,6 +72,7 @@ from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
 from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope,
                        fourier_normal, fourier_sample)
 from ..types import SHAPE_SPHERE
+from .face_search import cell_reach, deepest_in_cell, hessian_norm, on_support_face, support_face
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
@@ -225,6 +228,7 @@ def collide_terrain(
     speculative_margin: float,
     cull: int,
     refresh_spheres: int,
+    face_search: int,
     # State in
     state_in: BodyState,
     # Solver in (the pose of the step's pass)
@@ -270,10 +274,17 @@ def collide_terrain(
     fourier_box = dynamic and terrain.terrain_kind == TERRAIN_FOURIER and not is_sphere
     gap_scale = wp.sqrt(1.0 + terrain.terrain_slope_bound * terrain.terrain_slope_bound)
     center = HeightSample()
-    if fourier_box and cull != 0:
+    face = wp.vec2i(0, 0)
+    half = model.body_size[body]
+    cell = model.body_checkpoint_cell[body]
+    reach_down = wp.vec2(0.0, 0.0)
+    if fourier_box:
         center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
                                 terrain.terrain_scale, terrain.terrain_offset,
                                 x[0], x[2])
+        # the support face's checkpoints climb to the crests within their cells (face_search.py)
+        face = support_face(rot, -fourier_normal(center.grad))
+        reach_down = cell_reach(rot, face, cell)
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
     active = int(0)
@@ -344,19 +355,42 @@ def collide_terrain(
                                     if apart < DUPLICATE_SHARE * radius:
                                         depth = float(-1.0e30)
                 else:
-                    point = x + rot * model.checkpoint_local[slot]
+                    local = model.checkpoint_local[slot]
+                    point = x + rot * local
+                    searched = face_search != 0 and on_support_face(local, half, face)
                     reachable = True
                     if cull != 0:
                         arm = point - x
                         rise = box_rise_bound(center, arm[0], arm[2], terrain.terrain_cubic_bound)
-                        gap = speculative_margin + h * wp.length(v + wp.cross(omega, arm)) + h * h * gravity_length
-                        reachable = point[1] - (center.height + rise) <= gap * gap_scale + slack
+                        speed = wp.length(v + wp.cross(omega, arm))
+                        lowest = point[1]
+                        if searched:
+                            # anywhere in the checkpoint's cell (face_search.py): reach rho across the
+                            # ground from it, and down by at most reach_down[1]
+                            rho = reach_down[0]
+                            r = wp.sqrt(arm[0] * arm[0] + arm[2] * arm[2])
+                            rise += (rho * (wp.length(center.grad) + hessian_norm(center) * r)
+                                     + 0.5 * hessian_norm(center) * rho * rho
+                                     + terrain.terrain_cubic_bound * ((r + rho) * (r + rho) * (r + rho) - r * r * r) / 6.0)
+                            lowest -= reach_down[1]
+                            speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
+                        window = speculative_margin + h * speed + h * h * gravity_length
+                        reachable = lowest - (center.height + rise) <= window * gap_scale + slack
                     if reachable:
-                        s = fourier_height_slope(terrain.terrain_coef, terrain.terrain_terms,
-                                                 terrain.terrain_frequency, terrain.terrain_scale,
-                                                 terrain.terrain_offset, point[0], point[2])
-                        normal = fourier_normal(s.grad)
-                        depth = (s.height - point[1]) * normal[1]
+                        if searched:
+                            # a checkpoint whose cell cannot come within the window of the surface skips the climb
+                            window = speculative_margin + h * (wp.length(v + wp.cross(omega, point - x))
+                                                               + wp.length(omega) * (cell[0] + cell[1] + cell[2])) + h * h * gravity_length
+                            deepest = deepest_in_cell(terrain, point, rot, local, half, cell, face, window)
+                            normal = fourier_normal(deepest.start_sample.grad)
+                            depth = deepest.start_depth + wp.min(deepest.depth - deepest.start_depth,
+                                                                 deepest.chord_bound)
+                        else:
+                            s = fourier_height_slope(terrain.terrain_coef, terrain.terrain_terms,
+                                                     terrain.terrain_frequency, terrain.terrain_scale,
+                                                     terrain.terrain_offset, point[0], point[2])
+                            normal = fourier_normal(s.grad)
+                            depth = (s.height - point[1]) * normal[1]
 
         point_vel = v + wp.cross(omega, point - x)
         approach = wp.max(-wp.dot(point_vel, normal), 0.0)
