@@ -48,6 +48,8 @@ VARIANTS = {
     "impacts always": {"impacts": "always"},
     # friction at the manifold's points (the corners) instead of the patch's arms (collide/contact_patch.py)
     "face friction at points": {"face_friction": "points"},
+    # boxes tested at their checkpoints alone, blind to crests between them (collide/face_search.py)
+    "checkpoints only": {"face_search": False},
 }
 
 # Per-stage split.  This host's speed swings by up to 2x over minutes (other tenants), so one

@@ -54,7 +54,9 @@ from ..kernel_args import TerrainModel
 from ..terrain import HeightSample, fourier_sample
 
 FACE_SEARCH_ITERATIONS = 6  # surface samples a climb may take after the checkpoint's
-FACE_SEARCH_STEP = wp.constant(1.0e-5)  # [m] a step under this ends the climb
+# [m] a climb step that gains less ends the climb: 1/70 of the depth a resting contact sags
+# (0.07 mm at the defaults), and under the oracle's resolution in tests/test_face_search.py
+FACE_SEARCH_GAIN = wp.constant(1.0e-5)
 
 
 @wp.func
@@ -91,18 +93,6 @@ def cell_bounds(local: float, half: float, cell: float) -> wp.vec2:
 
 
 @wp.func
-def cell_reach(rot: wp.mat33, face: wp.vec2i, cell: wp.vec3) -> wp.vec2:
-    """(horizontal reach, drop) of a cell: how far its points lie from the checkpoint across the
-    ground and how much lower at most."""
-    a = (face[0] + 1) % 3
-    b = (face[0] + 2) % 3
-    ea = body_axis(rot, a)
-    eb = body_axis(rot, b)
-    horizontal = cell[a] * wp.sqrt(ea[0] * ea[0] + ea[2] * ea[2]) + cell[b] * wp.sqrt(eb[0] * eb[0] + eb[2] * eb[2])
-    return wp.vec2(horizontal, cell[a] * wp.abs(ea[1]) + cell[b] * wp.abs(eb[1]))
-
-
-@wp.func
 def hessian_norm(s: HeightSample) -> float:
     """|K|: the largest absolute eigenvalue of the Hessian [[Hxx, Hxz], [Hxz, Hzz]]."""
     mean = 0.5 * (s.hess[0] + s.hess[2])
@@ -120,6 +110,29 @@ def along(s: HeightSample, e: wp.vec3) -> float:
 def curvature(s: HeightSample, e: wp.vec3, f: wp.vec3) -> float:
     """e_h^T K f_h."""
     return s.hess[0] * e[0] * f[0] + s.hess[1] * (e[0] * f[2] + e[2] * f[0]) + s.hess[2] * e[2] * f[2]
+
+
+@wp.func
+def cell_rise(center: HeightSample, arm: wp.vec3, rot: wp.mat33, face: wp.vec2i, cell: wp.vec3,
+              cubic_bound: float) -> float:
+    """How much deeper than the Taylor bound at the checkpoint (terrain_contact.box_rise_bound) any
+    point of its cell can be: for the cell's point p + a e_a + b e_b, with v = arm_h + delta_h,
+
+        d <= d_bound(arm) + a (g . e_a,h - e_a,y) + b (g . e_b,h - e_b,y) + arm_h^T K delta_h
+             + delta_h^T K delta_h / 2 + T (|v|^3 - |arm_h|^3) / 6
+
+    (g, K the centre's gradient and Hessian), each term bounded over |a| <= w_a, |b| <= w_b.  The
+    slopes are the depth's along the face, so a face lying along the ground adds little."""
+    ea = body_axis(rot, (face[0] + 1) % 3)
+    eb = body_axis(rot, (face[0] + 2) % 3)
+    wa = cell[(face[0] + 1) % 3]
+    wb = cell[(face[0] + 2) % 3]
+    reach = wa * wp.sqrt(ea[0] * ea[0] + ea[2] * ea[2]) + wb * wp.sqrt(eb[0] * eb[0] + eb[2] * eb[2])
+    r = wp.sqrt(arm[0] * arm[0] + arm[2] * arm[2])
+    k_norm = hessian_norm(center)
+    k_arm = wp.vec2(center.hess[0] * arm[0] + center.hess[1] * arm[2], center.hess[1] * arm[0] + center.hess[2] * arm[2])
+    return (wa * wp.abs(along(center, ea)) + wb * wp.abs(along(center, eb)) + wp.length(k_arm) * reach
+            + 0.5 * k_norm * reach * reach + cubic_bound * ((r + reach) * (r + reach) * (r + reach) - r * r * r) / 6.0)
 
 
 @wp.struct
@@ -187,7 +200,17 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
             slope_b = gb + hab * (moved[0] - offset[0])
             moved = wp.vec2(moved[0], wp.clamp(offset[1] - slope_b / hbb, bounds_b[0], bounds_b[1]))
         step = scale * (moved - offset)
-        if wp.length(step) < FACE_SEARCH_STEP:
+        # the quadratic model's gain over the step, and how far the model can be off over it
+        # (T |step|^3 / 6, T bounding the third derivatives): a step that gains under
+        # FACE_SEARCH_GAIN ends the climb, and one the model predicts that closely is taken from
+        # the model, without a sample
+        gain = ga * step[0] + gb * step[1] + 0.5 * (haa * step[0] * step[0] + 2.0 * hab * step[0] * step[1]
+                                                     + hbb * step[1] * step[1])
+        if gain < FACE_SEARCH_GAIN:
+            break
+        reach = wp.length(step)
+        if terrain.terrain_cubic_bound * reach * reach * reach < 6.0 * FACE_SEARCH_GAIN:
+            best.depth = best.depth + gain / wp.sqrt(1.0 + s.grad[0] * s.grad[0] + s.grad[1] * s.grad[1])
             break
         # a step that does not climb is cut to a quarter (a cube resting on its edge over a crest
         # stepped 0.1 m off the edge along an axis of curvature -0.002 / m and reported 0.03 of its

@@ -72,7 +72,7 @@ from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
 from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope,
                        fourier_normal, fourier_sample)
 from ..types import SHAPE_SPHERE
-from .face_search import cell_reach, deepest_in_cell, hessian_norm, on_support_face, support_face
+from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
@@ -277,14 +277,12 @@ def collide_terrain(
     face = wp.vec2i(0, 0)
     half = model.body_size[body]
     cell = model.body_checkpoint_cell[body]
-    reach_down = wp.vec2(0.0, 0.0)
     if fourier_box:
         center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
                                 terrain.terrain_scale, terrain.terrain_offset,
                                 x[0], x[2])
         # the support face's checkpoints climb to the crests within their cells (face_search.py)
         face = support_face(rot, -fourier_normal(center.grad))
-        reach_down = cell_reach(rot, face, cell)
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
     active = int(0)
@@ -363,19 +361,12 @@ def collide_terrain(
                         arm = point - x
                         rise = box_rise_bound(center, arm[0], arm[2], terrain.terrain_cubic_bound)
                         speed = wp.length(v + wp.cross(omega, arm))
-                        lowest = point[1]
                         if searched:
-                            # anywhere in the checkpoint's cell (face_search.py): reach rho across the
-                            # ground from it, and down by at most reach_down[1]
-                            rho = reach_down[0]
-                            r = wp.sqrt(arm[0] * arm[0] + arm[2] * arm[2])
-                            rise += (rho * (wp.length(center.grad) + hessian_norm(center) * r)
-                                     + 0.5 * hessian_norm(center) * rho * rho
-                                     + terrain.terrain_cubic_bound * ((r + rho) * (r + rho) * (r + rho) - r * r * r) / 6.0)
-                            lowest -= reach_down[1]
+                            # anywhere in the checkpoint's cell (face_search.py)
+                            rise += cell_rise(center, arm, rot, face, cell, terrain.terrain_cubic_bound)
                             speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
                         window = speculative_margin + h * speed + h * h * gravity_length
-                        reachable = lowest - (center.height + rise) <= window * gap_scale + slack
+                        reachable = point[1] - (center.height + rise) <= window * gap_scale + slack
                     if reachable:
                         if searched:
                             # a checkpoint whose cell cannot come within the window of the surface skips the climb
