@@ -16,7 +16,10 @@ amplitude); otherwise the terrain is noise to float32 (``frequency = 1e30``: the
 through and no contact is ever found) and the build is refused, naming the highest usable
 frequency.  What the contact method resolves is then a warning, not an error: box checkpoints
 sample the surface every d = 2 h_max / (checkpoints_per_edge - 1), so by Nyquist a term whose
-world wavelength 2 pi / (f |(m / s.x, n / s.z)|) is shorter than 2 d fits between them.  A
+world wavelength 2 pi / (f |(m / s.x, n / s.z)|) is shorter than 2 d fits between them (the
+checkpoints of the face turned to the ground climb to a crest within their cell, which they find
+from where the surface is concave: within a quarter wavelength of the crest, which this rule
+gives; collide/face_search.py).  A
 sphere under the terrain's curvature radius touches it at one point; a wider one searches for up
 to five (collide/terrain_contact.py), which stand for the whole sphere while its diameter stays
 below the shortest wavelength (about a crest and a trough each way under it).  Terms of world

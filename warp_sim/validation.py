@@ -439,7 +439,7 @@ TERRAIN_KIND = Choice(("fourier", "plane", "none"), default="none")
 
 FOURIER_SCHEMA = {
     "kind": TERRAIN_KIND,
-    "terms": Integer(ge=1, le=32),
+    "terms": Integer(ge=1, le=32),  # terrain.MAX_TERMS: the Warp evaluation keeps that many powers
     "frequency": Number(gt=0),
     "amplitude": Number(ge=0),
     "phase": Number(),
