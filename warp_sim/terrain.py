@@ -232,11 +232,6 @@ class HeightSample:
     hess: wp.vec3
 
 
-# The powers e^{i f n w}, n < terms, kept per evaluation (terms <= MAX_TERMS, validation.py).
-MAX_TERMS = 32
-TermPowers = wp.types.vector(length=MAX_TERMS, dtype=float)
-
-
 @wp.func
 def fourier_evaluate(
     terrain_coef: wp.array(dtype=wp.vec2),
@@ -249,25 +244,12 @@ def fourier_evaluate(
     hessian: int,
 ) -> HeightSample:
     """The series and its derivatives at (x, z); the Hessian only when ``hessian`` (else 0): a
-    sample that needs only height and slope skips a third of the work per term.
-
-    Summed row by row: with S_m = sum_n C(m,n) e^{i f n w} and its weighted sums S1_m (times n)
-    and S2_m (times n^2), H = Re sum_m e^{i f m u} S_m, and each derivative is one such sum too
-    (dH/du = -f sum_m m Im(e^{i f m u} S_m), dH/dw = -f sum_m Im(e^{i f m u} S1_m), ...).  The
-    powers of e^{i f w} are made once, not once per row, so a term costs one complex product and
-    its weighted sums: about half the arithmetic of the plain double sum."""
+    sample that needs only height and slope skips a third of the work per term."""
     f = terrain_frequency
     u = (x - terrain_offset[0]) / terrain_scale[0]
     w = (z - terrain_offset[2]) / terrain_scale[2]
     ex = wp.vec2(wp.cos(f * u), wp.sin(f * u))
     ez = wp.vec2(wp.cos(f * w), wp.sin(f * w))
-    zr = TermPowers()
-    zi = TermPowers()
-    pn = wp.vec2(1.0, 0.0)
-    for n in range(terrain_terms):
-        zr[n] = pn[0]
-        zi[n] = pn[1]
-        pn = wp.vec2(pn[0] * ez[0] - pn[1] * ez[1], pn[0] * ez[1] + pn[1] * ez[0])
     h = float(0.0)
     hu = float(0.0)
     hw = float(0.0)
@@ -276,29 +258,21 @@ def fourier_evaluate(
     hww = float(0.0)
     pm = wp.vec2(1.0, 0.0)
     for m in range(terrain_terms):
-        s0 = wp.vec2(0.0, 0.0)
-        s1 = wp.vec2(0.0, 0.0)
-        s2 = wp.vec2(0.0, 0.0)
-        row = m * terrain_terms
-        for n in range(terrain_terms):
-            c = terrain_coef[row + n]
-            term = wp.vec2(c[0] * zr[n] - c[1] * zi[n], c[0] * zi[n] + c[1] * zr[n])
-            fn = float(n)
-            s0 += term
-            s1 += fn * term
-            if hessian != 0:
-                s2 += (fn * fn) * term
+        pn = pm
         fm = f * float(m)
-        t0 = wp.vec2(pm[0] * s0[0] - pm[1] * s0[1], pm[0] * s0[1] + pm[1] * s0[0])
-        t1 = wp.vec2(pm[0] * s1[0] - pm[1] * s1[1], pm[0] * s1[1] + pm[1] * s1[0])
-        h += t0[0]
-        hu -= fm * t0[1]
-        hw -= f * t1[1]
-        if hessian != 0:
-            t2r = pm[0] * s2[0] - pm[1] * s2[1]
-            huu -= fm * fm * t0[0]
-            huw -= fm * f * t1[0]
-            hww -= f * f * t2r
+        for n in range(terrain_terms):
+            c = terrain_coef[m * terrain_terms + n]
+            re = c[0] * pn[0] - c[1] * pn[1]
+            im = c[0] * pn[1] + c[1] * pn[0]
+            fn = f * float(n)
+            h += re
+            hu -= fm * im
+            hw -= fn * im
+            if hessian != 0:
+                huu -= fm * fm * re
+                huw -= fm * fn * re
+                hww -= fn * fn * re
+            pn = wp.vec2(pn[0] * ez[0] - pn[1] * ez[1], pn[0] * ez[1] + pn[1] * ez[0])
         pm = wp.vec2(pm[0] * ex[0] - pm[1] * ex[1], pm[0] * ex[1] + pm[1] * ex[0])
     sx = terrain_scale[0]
     sy = terrain_scale[1]
