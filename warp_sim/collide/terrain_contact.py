@@ -276,8 +276,9 @@ def collide_terrain(
     center = HeightSample()
     face = wp.vec2i(0, 0)
     half = model.body_size[body]
-    cell = model.body_checkpoint_cell[body]
+    cell = wp.vec3(0.0)
     if fourier_box:
+        cell = model.body_checkpoint_cell[body]  # a sphere's thread does not read it
         center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
                                 terrain.terrain_scale, terrain.terrain_offset,
                                 x[0], x[2])
