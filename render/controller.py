@@ -55,6 +55,7 @@ PARAMS: dict[str, Param] = {
     "dt": Param("sim", "float", 1e-4, 0.1, label="time step [s]"),
     "substeps": Param("sim", "int", 1, 64),
     "auto_substeps": Param("sim", "bool", label="more substeps where columns sag or piles are landed on"),
+    "face_search": Param("sim", "bool", label="boxes find crests between their checkpoints"),
     "gravity": Param("sim", "vec3", -100.0, 100.0, label="gravity [m/s^2]"),
     "integrator": Param("sim", "choice", choices=tuple(INTEGRATORS)),
     "rotation": Param("sim", "choice", choices=tuple(ROTATIONS)),

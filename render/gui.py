@@ -206,6 +206,7 @@ class Gui:
             if plan is not None and plan.substeps != plan.requested:  # auto_substeps raised it (column_sag.py)
                 imgui.text_colored(DIM_COLOR, f"running {plan.substeps} substeps: {plan.reason()}")
             self._vec3("gravity", 0.1)
+            self._bool("face_search")
             self._choice("integrator")
             self._choice("rotation")
             self._int("iterations", 1, 32)

@@ -378,6 +378,9 @@ def test_gui_parameter_path_updates_physics_and_terrain_block(viewer):
         c.set_param("no_such_thing", 1)
     c.set_param("terms", 5)
     c.set_param("amplitude", 0.5)
+    assert c.set_param("face_search", False) is False and c.sim.config.face_search is False
+    assert c.set_param("face_search", "yes") is False  # only real booleans are taken
+    c.set_param("face_search", True)
 
     c.set_param("tess_max_level", 20.0)
     assert viewer.terrain.block.get("terrain_tess")[3] == pytest.approx(20.0)
