@@ -54,8 +54,9 @@ from ..kernel_args import TerrainModel
 from ..terrain import HeightSample, fourier_sample
 
 FACE_SEARCH_ITERATIONS = 6  # surface samples a climb may take after the checkpoint's
-# [m] a climb step that gains less ends the climb: 1/70 of the depth a resting contact sags
-# (0.07 mm at the defaults), and under the oracle's resolution in tests/test_face_search.py
+# [m] a climb step that gains less ends the climb, and one the quadratic model predicts within it
+# is taken from the model: 1/7 of the depth a resting contact sags (0.07 mm at the defaults), a
+# tenth of what tests/test_face_search.py allows a contact's depth beside the oracle's.
 FACE_SEARCH_GAIN = wp.constant(1.0e-5)
 
 
