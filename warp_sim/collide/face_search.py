@@ -148,9 +148,15 @@ class CellPoint:
 
 
 @wp.func
+def normal_y(s: HeightSample) -> float:
+    """n_y of the surface normal at the sample: 1 / sqrt(1 + |grad H|^2)."""
+    return 1.0 / wp.sqrt(1.0 + s.grad[0] * s.grad[0] + s.grad[1] * s.grad[1])
+
+
+@wp.func
 def depth_at(s: HeightSample, p: wp.vec3) -> float:
     """(H - p_y) n_y: the first-order distance of p below the surface (terrain_contact.py)."""
-    return (s.height - p[1]) / wp.sqrt(1.0 + s.grad[0] * s.grad[0] + s.grad[1] * s.grad[1])
+    return (s.height - p[1]) * normal_y(s)
 
 
 @wp.func
@@ -211,7 +217,7 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
             break
         reach = wp.length(step)
         if terrain.terrain_cubic_bound * reach * reach * reach < 6.0 * FACE_SEARCH_GAIN:
-            best.depth = best.depth + gain / wp.sqrt(1.0 + s.grad[0] * s.grad[0] + s.grad[1] * s.grad[1])
+            best.depth = best.depth + gain * normal_y(s)
             break
         # a step that does not climb is cut to a quarter (a cube resting on its edge over a crest
         # stepped 0.1 m off the edge along an axis of curvature -0.002 / m and reported 0.03 of its

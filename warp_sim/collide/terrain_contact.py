@@ -357,22 +357,22 @@ def collide_terrain(
                     local = model.checkpoint_local[slot]
                     point = x + rot * local
                     searched = face_search != 0 and on_support_face(local, half, face)
+                    arm = point - x
+                    # the gap the checkpoint (anywhere in its cell, when searched: face_search.py) can
+                    # close in one substep
+                    speed = wp.length(v + wp.cross(omega, arm))
+                    if searched:
+                        speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
+                    window = speculative_margin + h * speed + h * h * gravity_length
                     reachable = True
                     if cull != 0:
-                        arm = point - x
                         rise = box_rise_bound(center, arm[0], arm[2], terrain.terrain_cubic_bound)
-                        speed = wp.length(v + wp.cross(omega, arm))
                         if searched:
-                            # anywhere in the checkpoint's cell (face_search.py)
                             rise += cell_rise(center, arm, rot, face, cell, terrain.terrain_cubic_bound)
-                            speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
-                        window = speculative_margin + h * speed + h * h * gravity_length
                         reachable = point[1] - (center.height + rise) <= window * gap_scale + slack
                     if reachable:
                         if searched:
-                            # a checkpoint whose cell cannot come within the window of the surface skips the climb
-                            window = speculative_margin + h * (wp.length(v + wp.cross(omega, point - x))
-                                                               + wp.length(omega) * (cell[0] + cell[1] + cell[2])) + h * h * gravity_length
+                            # a checkpoint whose cell cannot come within the window skips the climb
                             deepest = deepest_in_cell(terrain, point, rot, local, half, cell, face, window)
                             normal = fourier_normal(deepest.start_sample.grad)
                             depth = deepest.start_depth + wp.min(deepest.depth - deepest.start_depth,
