@@ -267,8 +267,12 @@ def collide_terrain(
     x = state_in.body_pos[body]
     rot = state_in.body_rot[body]
     v = state_in.body_vel[body]
-    omega = world_inv_inertia(rot, model.body_inv_inertia[body]) * state_in.body_angmom[body]
     is_sphere = model.body_shape[body] == SHAPE_SPHERE
+    omega = wp.vec3(0.0)
+    if is_sphere:
+        omega = model.body_inv_inertia[body][0] * state_in.body_angmom[body]  # isotropic: no R I^-1 R^T
+    else:
+        omega = world_inv_inertia(rot, model.body_inv_inertia[body]) * state_in.body_angmom[body]
     radius = model.body_size[body][0]
     dynamic = model.body_inv_mass[body] > 0.0
     fourier_box = dynamic and terrain.terrain_kind == TERRAIN_FOURIER and not is_sphere

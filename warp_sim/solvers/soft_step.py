@@ -38,14 +38,15 @@ sweeps are true Gauss-Seidel within a body and need no colouring.
 """
 
 import math
+from typing import Any
 
 import warp as wp
 
 from ..collide.contact_patch import NO_TWIST, terrain_patch, twist_arm
 from ..column_sag import contact_hertz as contact_frequency
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
-from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
-from ..types import SHAPE_SPHERE
+from ..integrate import cayley_quat, integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
+from ..types import INTEGRATOR_SEMI_IMPLICIT, ROTATION_QUATERNION, SHAPE_BOX, SHAPE_SPHERE
 from .contact_rows import closed_contact_bias, closed_during_substep
 from .impact_terrain import impact_terrain
 from .solver_args import StepSettings
@@ -140,7 +141,7 @@ class BodyVelocity:
 
 @wp.func
 def apply_impulse(
-    vel: BodyVelocity, impulse: wp.vec3, arm: wp.vec3, inv_mass: float, inv_inertia: wp.mat33
+    vel: BodyVelocity, impulse: wp.vec3, arm: wp.vec3, inv_mass: float, inv_inertia: Any
 ) -> BodyVelocity:
     out = vel
     out.v = vel.v + inv_mass * impulse
@@ -150,7 +151,7 @@ def apply_impulse(
 
 @wp.func
 def apply_contact_impulse(vel: BodyVelocity, normal_part: wp.vec3, tangent_part: wp.vec3, arm: wp.vec3,
-                          n: wp.vec3, twist: wp.vec4, inv_mass: float, inv_inertia: wp.mat33) -> BodyVelocity:
+                          n: wp.vec3, twist: wp.vec4, inv_mass: float, inv_inertia: Any) -> BodyVelocity:
     """A contact's stored impulse, its friction part at the patch's friction arm (contact_patch.py); as
     one impulse at ``arm`` where that is the arm itself.  A contact holding none (an idle
     speculative one: most of a settled box's) changes nothing and is skipped."""
@@ -187,7 +188,7 @@ def solve_terrain_contact(
     x: wp.vec3,
     vel: BodyVelocity,
     inv_mass: float,
-    inv_inertia: wp.mat33,
+    inv_inertia: Any,
     friction: float,
     h: float,
     use_bias: int,
@@ -254,7 +255,7 @@ def solve_terrain_contact(
 def solve_rolling(
     vel: BodyVelocity,
     n: wp.vec3,
-    inv_inertia: wp.mat33,
+    inv_inertia: Any,
     limit: float,
 ) -> BodyVelocity:
     """Angular impulse against the spin (rolling and twisting about n), accumulated, clamped to ``limit``.
@@ -287,7 +288,7 @@ def sweep(
     x: wp.vec3,
     vel: BodyVelocity,
     inv_mass: float,
-    inv_inertia: wp.mat33,
+    inv_inertia: Any,
     friction: float,
     rolling_limit_per_impulse: float,
     h: float,
@@ -295,7 +296,7 @@ def sweep(
     soft: wp.vec4,
     max_push_velocity: float,
     drift_p: wp.vec3,
-    drift_r: wp.mat33,
+    drift_r: Any,
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
     terrain_contact_normal: wp.array(dtype=wp.vec3),
@@ -327,7 +328,7 @@ def warm_start_terrain(
     x: wp.vec3,
     vel: BodyVelocity,
     inv_mass: float,
-    inv_inertia: wp.mat33,
+    inv_inertia: Any,
     twist: wp.vec4,
     terrain_contact_active: wp.array(dtype=wp.int32),
     terrain_contact_point: wp.array(dtype=wp.vec3),
@@ -367,6 +368,179 @@ def sweep_converged(before: BodyVelocity, after: BodyVelocity, reach: float, tol
     return change < tolerance
 
 
+@wp.func
+def as_matrix(inv_inertia: float) -> wp.mat33:
+    return wp.diag(wp.vec3(inv_inertia))
+
+
+@wp.func
+def as_matrix(inv_inertia: wp.mat33) -> wp.mat33:
+    return inv_inertia
+
+
+@wp.func
+def no_turn(inv_inertia: float) -> float:
+    """A zero drift_rotation of the inertia's type: for the scalar of a sphere, the scalar 0."""
+    return 0.0
+
+
+@wp.func
+def no_turn(inv_inertia: wp.mat33) -> wp.mat33:
+    return wp.mat33(0.0)
+
+
+@wp.func
+def turn_since(inv_inertia: float, rot_now: wp.mat33, rot_ref: wp.mat33) -> float:
+    """drift_rotation by the inertia's type: a sphere's anchor does not turn with it (0)."""
+    return 0.0
+
+
+@wp.func
+def turn_since(inv_inertia: wp.mat33, rot_now: wp.mat33, rot_ref: wp.mat33) -> wp.mat33:
+    return drift_rotation(SHAPE_BOX, rot_now, rot_ref)
+
+
+@wp.func
+def turn_body(inv_inertia: float, q: wp.quat, rot: wp.mat33, body_inv_inertia: wp.vec3, angmom: wp.vec3, h: float,
+              integrator: int, rotation: int) -> tuple[wp.quat, wp.mat33]:
+    """integrate_rotation for a sphere: with an isotropic inertia the gyroscopic term of the
+    midpoint rule, (I^-1 m) x m, vanishes, so the midpoint angular velocity is I^-1 R^T L itself
+    and its Newton solve (integrate.midpoint_body_omega) is skipped."""
+    if integrator == INTEGRATOR_SEMI_IMPLICIT and rotation == ROTATION_QUATERNION:
+        q_mid = wp.normalize(q * cayley_quat(inv_inertia * (wp.transpose(rot) * angmom), h))
+        return q_mid, wp.quat_to_matrix(q_mid)
+    return integrate_rotation(q, rot, body_inv_inertia, angmom, h, integrator, rotation)
+
+
+@wp.func
+def turn_body(inv_inertia: wp.mat33, q: wp.quat, rot: wp.mat33, body_inv_inertia: wp.vec3, angmom: wp.vec3, h: float,
+              integrator: int, rotation: int) -> tuple[wp.quat, wp.mat33]:
+    return integrate_rotation(q, rot, body_inv_inertia, angmom, h, integrator, rotation)
+
+
+@wp.func(inline=True)
+def step_body(
+    i: int,
+    x: wp.vec3,
+    q: wp.quat,
+    rot: wp.mat33,
+    angmom: wp.vec3,
+    inv_mass: float,
+    inv_inertia: Any,
+    inertia: Any,
+    model: BodyModel,
+    settings: StepSettings,
+    slots: TerrainContacts,
+    impact_normal: wp.array(dtype=float),
+    impact_tangent: wp.array(dtype=wp.vec3),
+    state_in: BodyState,
+    state_out: BodyState,
+    bad_steps: BadSteps,
+):
+    """One body's substep (the sequence of the module docstring), its world inertia and inverse
+    either matrices or, for a sphere, the scalars they are: a sphere's inertia is isotropic, so
+    each I^-1 r product is three multiplications instead of a matrix product, and the fused
+    terrain-only step of a scene of spheres spends most of its time in those products."""
+    alpha = pre_kick_fraction(settings.integrator)
+    vel = BodyVelocity()
+    vel.v = state_in.body_vel[i] + (alpha * settings.h) * settings.gravity
+    omega_free = inv_inertia * angmom
+    vel.w = omega_free
+    vel.rolling_impulse = wp.vec3(0.0)
+
+    start = model.body_checkpoint_start[i]
+    count = model.body_checkpoint_count[i]
+    friction = model.body_friction[i]
+    rolling = float(0.0)
+    if model.body_shape[i] == SHAPE_SPHERE:
+        rolling = model.body_rolling_resistance[i] * model.body_size[i][0]
+
+    touching = int(0)
+    holding = int(0)
+    for slot in range(start, start + count):
+        touching = touching | slots.terrain_contact_active[slot]
+        if slots.terrain_contact_active[slot] != 0 and slots.terrain_contact_normal_impulse[slot] > 0.0:
+            holding = 1
+    zero = wp.vec3(0.0)
+    still = no_turn(inv_inertia)
+    toi_shift = wp.vec3(0.0)
+    e = model.body_restitution[i]
+    if touching != 0 and (e > 0.0 or settings.impacts_always != 0):
+        # impacts act on the velocity the last solve left, without this substep's gravity
+        v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
+        hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, as_matrix(inv_inertia), zero, wp.mat33(0.0), e, friction,
+                             settings.h, settings.gravity, settings.restitution_threshold,
+                             settings.h, 0.0,  # no pairs on this path: nothing shadows a terrain point
+                             slots.terrain_contact_active, slots.terrain_contact_point,
+                             slots.terrain_contact_normal, slots.terrain_contact_depth, impact_normal,
+                             impact_tangent)
+        vel.v = hit.v + settings.h * settings.gravity
+        vel.w = hit.w
+        toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
+
+    # Warm start
+    # friction acts at the arms of the patch the carried impulses make (contact_patch.py), for the substep
+    twist = NO_TWIST
+    if settings.face_patch != 0:
+        twist = terrain_patch(start, count, 0, x, rot, friction, slots.terrain_contact_active,
+                              slots.terrain_contact_active, slots.terrain_contact_point, slots.terrain_contact_normal,
+                              slots.terrain_contact_depth, slots.terrain_contact_normal_impulse)
+    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, twist, slots.terrain_contact_active,
+                             slots.terrain_contact_point, slots.terrain_contact_normal,
+                             slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
+
+    reach = model.body_size[i][0]
+    if model.body_shape[i] != SHAPE_SPHERE:
+        reach = wp.length(model.body_size[i])
+    if touching != 0:
+        for _it in range(solve_sweeps(settings.iterations, settings.relax_passes, count, holding)):
+            before = vel
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, 1,
+                        settings.soft, settings.max_push_velocity, zero, still, slots.terrain_contact_active,
+                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
+            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
+                break
+
+    # Drift: positions and orientation move with the solved velocity
+    new_angmom = angmom
+    if touching != 0:
+        new_angmom = angmom + inertia * (vel.w - omega_free)
+    step = settings.h * vel.v + toi_shift
+    x_new = x + step
+    q_new, rot_new = turn_body(inv_inertia, q, rot, model.body_inv_inertia[i], new_angmom, settings.h,
+                                        settings.integrator, settings.rotation)
+
+    if touching != 0:
+        relax_bias = wp.where(e > 0.0, -1, 0)
+        shift_v = step
+        shift_r = turn_since(inv_inertia, rot_new, rot)
+        # a box's points give back their push speed in several passes (staged.sweep_body_terrain)
+        relax_sweeps = wp.where(count > 1, settings.relax_iterations * settings.relax_passes, settings.relax_iterations)
+        for _it in range(relax_sweeps):
+            before = vel
+            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,
+                        settings.soft, settings.max_push_velocity, shift_v, shift_r, slots.terrain_contact_active,
+                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
+                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
+            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
+                break
+        new_angmom = angmom + inertia * (vel.w - omega_free)
+
+    v_new = vel.v + ((1.0 - alpha) * settings.h) * settings.gravity
+    state_out.body_pos[i] = x_new
+    state_out.body_quat[i] = q_new
+    state_out.body_rot[i] = rot_new
+    state_out.body_vel[i] = v_new
+    state_out.body_angmom[i] = new_angmom
+
+    total = wp.dot(x_new, x_new) + wp.dot(v_new, v_new) + wp.dot(new_angmom, new_angmom) + wp.ddot(rot_new, rot_new)
+    if not wp.isfinite(total):
+        if bad_steps.body_bad_step[i] < 0:
+            bad_steps.body_bad_step[i] = bad_steps.sim_step[0]
+            wp.atomic_add(bad_steps.bad_count, 0, 1)
+
+
 @wp.kernel
 def solve_and_integrate(
     tid_offset: int,
@@ -400,102 +574,10 @@ def solve_and_integrate(
         state_out.body_angmom[i] = angmom
         return
 
-    alpha = pre_kick_fraction(settings.integrator)
-    inv_inertia = world_inv_inertia(rot, model.body_inv_inertia[i])
-    vel = BodyVelocity()
-    vel.v = state_in.body_vel[i] + (alpha * settings.h) * settings.gravity
-    omega_free = inv_inertia * angmom
-    vel.w = omega_free
-    vel.rolling_impulse = wp.vec3(0.0)
-
-    start = model.body_checkpoint_start[i]
-    count = model.body_checkpoint_count[i]
-    friction = model.body_friction[i]
-    rolling = float(0.0)
     if model.body_shape[i] == SHAPE_SPHERE:
-        rolling = model.body_rolling_resistance[i] * model.body_size[i][0]
-
-    touching = int(0)
-    holding = int(0)
-    for slot in range(start, start + count):
-        touching = touching | slots.terrain_contact_active[slot]
-        if slots.terrain_contact_active[slot] != 0 and slots.terrain_contact_normal_impulse[slot] > 0.0:
-            holding = 1
-    zero = wp.vec3(0.0)
-    no_turn = wp.mat33(0.0)
-    toi_shift = wp.vec3(0.0)
-    e = model.body_restitution[i]
-    if touching != 0 and (e > 0.0 or settings.impacts_always != 0):
-        # impacts act on the velocity the last solve left, without this substep's gravity
-        v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
-        hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, inv_inertia, zero, no_turn, e, friction,
-                             settings.h, settings.gravity, settings.restitution_threshold,
-                             settings.h, 0.0,  # no pairs on this path: nothing shadows a terrain point
-                             slots.terrain_contact_active, slots.terrain_contact_point,
-                             slots.terrain_contact_normal, slots.terrain_contact_depth, impact_normal,
-                             impact_tangent)
-        vel.v = hit.v + settings.h * settings.gravity
-        vel.w = hit.w
-        toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
-
-    # Warm start
-    # friction acts at the arms of the patch the carried impulses make (contact_patch.py), for the substep
-    twist = NO_TWIST
-    if settings.face_patch != 0:
-        twist = terrain_patch(start, count, 0, x, rot, friction, slots.terrain_contact_active,
-                              slots.terrain_contact_active, slots.terrain_contact_point, slots.terrain_contact_normal,
-                              slots.terrain_contact_depth, slots.terrain_contact_normal_impulse)
-    vel = warm_start_terrain(start, count, x, vel, inv_mass, inv_inertia, twist, slots.terrain_contact_active,
-                             slots.terrain_contact_point, slots.terrain_contact_normal,
-                             slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse)
-
-    reach = model.body_size[i][0]
-    if model.body_shape[i] != SHAPE_SPHERE:
-        reach = wp.length(model.body_size[i])
-    if touching != 0:
-        for _it in range(solve_sweeps(settings.iterations, settings.relax_passes, count, holding)):
-            before = vel
-            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, 1,
-                        settings.soft, settings.max_push_velocity, zero, no_turn, slots.terrain_contact_active,
-                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
-                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
-            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
-                break
-
-    # Drift: positions and orientation move with the solved velocity
-    new_angmom = angmom
-    if touching != 0:
-        new_angmom = angmom + world_inertia(rot, model.body_inertia[i]) * (vel.w - omega_free)
-    step = settings.h * vel.v + toi_shift
-    x_new = x + step
-    q_new, rot_new = integrate_rotation(q, rot, model.body_inv_inertia[i], new_angmom, settings.h,
-                                        settings.integrator, settings.rotation)
-
-    if touching != 0:
-        relax_bias = wp.where(e > 0.0, -1, 0)
-        shift_v = step
-        shift_r = drift_rotation(model.body_shape[i], rot_new, rot)
-        # a box's points give back their push speed in several passes (staged.sweep_body_terrain)
-        relax_sweeps = wp.where(count > 1, settings.relax_iterations * settings.relax_passes, settings.relax_iterations)
-        for _it in range(relax_sweeps):
-            before = vel
-            vel = sweep(start, count, x, vel, inv_mass, inv_inertia, friction, rolling, settings.h, relax_bias,
-                        settings.soft, settings.max_push_velocity, shift_v, shift_r, slots.terrain_contact_active,
-                        slots.terrain_contact_point, slots.terrain_contact_normal, slots.terrain_contact_depth,
-                        slots.terrain_contact_normal_impulse, slots.terrain_contact_tangent_impulse, twist)
-            if sweep_converged(before, vel, reach, settings.convergence_tolerance):
-                break
-        new_angmom = angmom + world_inertia(rot, model.body_inertia[i]) * (vel.w - omega_free)
-
-    v_new = vel.v + ((1.0 - alpha) * settings.h) * settings.gravity
-    state_out.body_pos[i] = x_new
-    state_out.body_quat[i] = q_new
-    state_out.body_rot[i] = rot_new
-    state_out.body_vel[i] = v_new
-    state_out.body_angmom[i] = new_angmom
-
-    total = wp.dot(x_new, x_new) + wp.dot(v_new, v_new) + wp.dot(new_angmom, new_angmom) + wp.ddot(rot_new, rot_new)
-    if not wp.isfinite(total):
-        if bad_steps.body_bad_step[i] < 0:
-            bad_steps.body_bad_step[i] = bad_steps.sim_step[0]
-            wp.atomic_add(bad_steps.bad_count, 0, 1)
+        step_body(i, x, q, rot, angmom, inv_mass, model.body_inv_inertia[i][0], model.body_inertia[i][0], model,
+                  settings, slots, impact_normal, impact_tangent, state_in, state_out, bad_steps)
+    else:
+        step_body(i, x, q, rot, angmom, inv_mass, world_inv_inertia(rot, model.body_inv_inertia[i]),
+                  world_inertia(rot, model.body_inertia[i]), model, settings, slots, impact_normal, impact_tangent,
+                  state_in, state_out, bad_steps)
