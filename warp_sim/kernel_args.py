@@ -60,7 +60,9 @@ class TerrainModel:
     terrain_offset: wp.vec3
     terrain_plane: wp.vec4
     terrain_slope_bound: float
+    terrain_curvature_bound: float
     terrain_cubic_bound: float
+    terrain_quartic_bound: float
 
 
 @wp.struct

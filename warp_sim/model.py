@@ -105,7 +105,9 @@ class Model:
         self.terrain_offset = wp.vec3(*fields["terrain_offset"])
         self.terrain_plane = wp.vec4(*fields["terrain_plane"])
         self.terrain_slope_bound = float(fields["terrain_slope_bound"])
+        self.terrain_curvature_bound = float(fields["terrain_curvature_bound"])
         self.terrain_cubic_bound = float(fields["terrain_cubic_bound"])
+        self.terrain_quartic_bound = float(fields["terrain_quartic_bound"])
 
     def to_scene_order(self, values, axis: int = 0) -> np.ndarray:
         """A per-body array (NumPy, or a Warp array such as ``sim.state.body_pos``) in internal

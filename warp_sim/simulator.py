@@ -98,6 +98,9 @@ class Simulator:
     # Skip box checkpoints that provably cannot reach the Fourier surface (collide/terrain_contact.py).
     # It changes no result; tests turn it off to check exactly that.
     terrain_cull = True
+    # A warm sphere's closest point from the third-order jet of one terrain sample where that is as
+    # near as the search's tolerance (collide/closest_jet.py); tests turn it off to compare.
+    closest_jet = True
     # With contacts found once per step, find the spheres' terrain contacts every substep anyway
     # (collide_terrain, refresh_spheres); bench/rain.py measures both.
     refresh_sphere_contacts = True
@@ -193,7 +196,7 @@ class Simulator:
                 bind(BodyModel, m, m), bind(TerrainModel, m, m),
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-                int(refresh_spheres), int(self.config.face_search),
+                int(refresh_spheres), int(self.config.face_search), int(self.closest_jet),
                 # State in
                 bind(BodyState, state, state), self.solver.solver_ref_pos,
                 # Contacts

@@ -225,11 +225,14 @@ Terrain = FourierTerrain | PlaneTerrain | NoTerrain
 
 @wp.struct
 class HeightSample:
-    """World height H, gradient (dH/dx, dH/dz) and Hessian (Hxx, Hxz, Hzz) at one (x, z)."""
+    """World height H, gradient (dH/dx, dH/dz), Hessian (Hxx, Hxz, Hzz) and third derivatives
+    (Hxxx, Hxxz, Hxzz, Hzzz) at one (x, z); each only where the evaluation's order asks for it,
+    else 0."""
 
     height: float
     grad: wp.vec2
     hess: wp.vec3
+    third: wp.vec4
 
 
 @wp.func
@@ -241,10 +244,11 @@ def fourier_evaluate(
     terrain_offset: wp.vec3,
     x: float,
     z: float,
-    hessian: int,
+    order: int,
 ) -> HeightSample:
-    """The series and its derivatives at (x, z); the Hessian only when ``hessian`` (else 0): a
-    sample that needs only height and slope skips a third of the work per term."""
+    """The series and its derivatives at (x, z) up to ``order`` (1: height and slope, 2: and the
+    Hessian, 3: and the third derivatives; the rest are 0): a sample that needs only height and
+    slope skips a third of the work per term."""
     f = terrain_frequency
     u = (x - terrain_offset[0]) / terrain_scale[0]
     w = (z - terrain_offset[2]) / terrain_scale[2]
@@ -256,6 +260,10 @@ def fourier_evaluate(
     huu = float(0.0)
     huw = float(0.0)
     hww = float(0.0)
+    huuu = float(0.0)
+    huuw = float(0.0)
+    huww = float(0.0)
+    hwww = float(0.0)
     pm = wp.vec2(1.0, 0.0)
     for m in range(terrain_terms):
         pn = pm
@@ -268,10 +276,16 @@ def fourier_evaluate(
             h += re
             hu -= fm * im
             hw -= fn * im
-            if hessian != 0:
+            if order >= 2:
                 huu -= fm * fm * re
                 huw -= fm * fn * re
                 hww -= fn * fn * re
+            if order >= 3:
+                # d/du multiplies a term by i f m: three times, -i (f m)^3, whose real part is + im
+                huuu += fm * fm * fm * im
+                huuw += fm * fm * fn * im
+                huww += fm * fn * fn * im
+                hwww += fn * fn * fn * im
             pn = wp.vec2(pn[0] * ez[0] - pn[1] * ez[1], pn[0] * ez[1] + pn[1] * ez[0])
         pm = wp.vec2(pm[0] * ex[0] - pm[1] * ex[1], pm[0] * ex[1] + pm[1] * ex[0])
     sx = terrain_scale[0]
@@ -281,6 +295,8 @@ def fourier_evaluate(
     s.height = terrain_offset[1] + sy * h
     s.grad = wp.vec2(hu * sy / sx, hw * sy / sz)
     s.hess = wp.vec3(huu * sy / (sx * sx), huw * sy / (sx * sz), hww * sy / (sz * sz))
+    s.third = wp.vec4(huuu * sy / (sx * sx * sx), huuw * sy / (sx * sx * sz), huww * sy / (sx * sz * sz),
+                      hwww * sy / (sz * sz * sz))
     return s
 
 
@@ -294,7 +310,7 @@ def fourier_sample(
     x: float,
     z: float,
 ) -> HeightSample:
-    return fourier_evaluate(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z, 1)
+    return fourier_evaluate(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z, 2)
 
 
 @wp.func
@@ -308,7 +324,7 @@ def fourier_height_slope(
     z: float,
 ) -> HeightSample:
     """Height and gradient only (hess is 0)."""
-    return fourier_evaluate(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z, 0)
+    return fourier_evaluate(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, x, z, 1)
 
 
 @wp.func
@@ -328,7 +344,9 @@ def terrain_model_fields(terrain: Terrain) -> dict:
         "terrain_offset": (0.0, 0.0, 0.0),
         "terrain_plane": (0.0, 1.0, 0.0, 0.0),
         "terrain_slope_bound": 0.0,
+        "terrain_curvature_bound": 0.0,
         "terrain_cubic_bound": 0.0,
+        "terrain_quartic_bound": 0.0,
     }
     if isinstance(terrain, FourierTerrain):
         out.update(
@@ -338,7 +356,9 @@ def terrain_model_fields(terrain: Terrain) -> dict:
             terrain_scale=tuple(terrain.scale),
             terrain_offset=tuple(terrain.offset),
             terrain_slope_bound=terrain.slope_bound(),
+            terrain_curvature_bound=terrain.curvature_bound(),
             terrain_cubic_bound=terrain.cubic_bound(),
+            terrain_quartic_bound=terrain.directional_bound(4),
         )
     elif isinstance(terrain, PlaneTerrain):
         out["terrain_plane"] = (*terrain.normal, terrain.offset)

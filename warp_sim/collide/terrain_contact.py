@@ -13,9 +13,11 @@ the Fourier evaluation gives for free:
 When that Hessian is not positive definite (the sphere centre lies beyond a centre of
 curvature) the Gauss-Newton part [[1 + Hx^2, Hx Hz], [Hx Hz, 1 + Hz^2]] is used instead, which
 always is.  The search starts from last substep's closest point (stored in the slot), so a
-resting sphere converges in one or two iterations.  A sphere whose vertical gap divided by
-sqrt(1 + G^2) (G bounds |grad H| everywhere) already exceeds r + margin cannot touch the
-surface and skips the search.
+resting sphere converges in one or two iterations, and a rolling one, whose first step is its
+centre's travel since, takes its second point from the third-order jet of the first sample where
+that is provably as near as the search's tolerance (closest_jet.py): one series evaluation
+instead of two or three.  A sphere whose vertical gap divided by sqrt(1 + G^2) (G bounds
+|grad H| everywhere) already exceeds r + margin cannot touch the surface and skips the search.
 
 Spheres wider than the terrain's tightest curve: the distance from the centre can have several
 local minima (the two walls of a trough narrower than the ball) and the point under the centre
@@ -69,8 +71,9 @@ import warp as wp
 
 from ..integrate import world_inv_inertia
 from ..kernel_args import BodyModel, BodyState, TerrainContacts, TerrainModel
-from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_height_slope,
-                       fourier_normal, fourier_sample)
+from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSample, fourier_evaluate,
+                       fourier_height_slope, fourier_normal, fourier_sample)
+from .closest_jet import jet_step
 from ..types import SHAPE_SPHERE
 from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
 
@@ -147,6 +150,8 @@ def sphere_fourier_closest(
     start: wp.vec2,
     start_sample: HeightSample,
     reach: float,
+    jet: int,
+    bounds: wp.vec4,
 ) -> tuple[wp.vec2, HeightSample]:
     """Surface point closest to ``center`` and its sample, by damped Newton from ``start``.
 
@@ -155,7 +160,10 @@ def sphere_fourier_closest(
     inside that horizontal disc and no step is longer than half of it.  This stops Newton from
     running off to a distant stationary point of F when it starts cold on steep ground.  The
     search stops once a step falls below a few float32 ulps of the coordinates, so a resting
-    sphere costs a single terrain evaluation.
+    sphere costs a single terrain evaluation.  With ``jet`` (a warm start whose sample carries the
+    third derivatives) a moving sphere's second evaluation is replaced by the jet's prediction
+    where that is as near the closest point as the tolerance asks (closest_jet.py; ``bounds`` =
+    the terrain's directional bounds of order 1 to 4).
     """
     xz = start
     s = start_sample
@@ -170,21 +178,32 @@ def sphere_fourier_closest(
         b = hx * hz + dy * s.hess[1]
         c = 1.0 + hz * hz + dy * s.hess[2]
         det = a * c - b * b
-        if a <= 0.0 or det <= 1.0e-12:
+        gauss_newton = a <= 0.0 or det <= 1.0e-12
+        if gauss_newton:
             a = 1.0 + hx * hx
             b = hx * hz
             c = 1.0 + hz * hz
             det = a * c - b * b
         step = wp.vec2((c * gx - b * gz) / det, (a * gz - b * gx) / det)
         length = wp.length(step)
-        if length < 1.0e-6 + 2.0e-7 * (wp.abs(xz[0]) + wp.abs(xz[1])):
+        tolerance = 1.0e-6 + 2.0e-7 * (wp.abs(xz[0]) + wp.abs(xz[1]))
+        if length < tolerance:
             break
+        full_newton = not gauss_newton
         if length > max_step:
             step = step * (max_step / length)
+            full_newton = False
         offset = wp.vec2(xz[0] - step[0] - center[0], xz[1] - step[1] - center[2])
         off_len = wp.length(offset)
         if off_len > reach:
             offset = offset * (reach / off_len)
+            full_newton = False
+        if jet != 0 and _it == 0 and full_newton:
+            predicted = jet_step(s, xz, dy, -step, wp.vec3(a, b, c), tolerance, bounds)
+            if predicted.accepted != 0:
+                xz = predicted.point
+                s = predicted.sample
+                break
         xz = wp.vec2(center[0] + offset[0], center[2] + offset[1])
         s = fourier_sample(terrain_coef, terrain_terms, terrain_frequency, terrain_scale, terrain_offset, xz[0], xz[1])
     return xz, s
@@ -197,12 +216,23 @@ def sample_at(terrain: TerrainModel, xz: wp.vec2) -> HeightSample:
 
 
 @wp.func
-def closest_from(terrain: TerrainModel, center: wp.vec3, start: wp.vec2,
-                 start_sample: HeightSample) -> tuple[wp.vec2, HeightSample]:
-    """sphere_fourier_closest from ``start``, its reach the distance from the centre to that point."""
+def jet_at(terrain: TerrainModel, xz: wp.vec2) -> HeightSample:
+    """sample_at with the third derivatives too (closest_jet.py)."""
+    return fourier_evaluate(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
+                            terrain.terrain_scale, terrain.terrain_offset, xz[0], xz[1], 3)
+
+
+@wp.func
+def closest_from(terrain: TerrainModel, center: wp.vec3, start: wp.vec2, start_sample: HeightSample,
+                 jet: int) -> tuple[wp.vec2, HeightSample]:
+    """sphere_fourier_closest from ``start``, its reach the distance from the centre to that point;
+    ``jet`` where ``start_sample`` came from jet_at."""
     reach = wp.length(center - wp.vec3(start[0], start_sample.height, start[1]))
+    bounds = wp.vec4(terrain.terrain_slope_bound, terrain.terrain_curvature_bound, terrain.terrain_cubic_bound,
+                     terrain.terrain_quartic_bound)
     return sphere_fourier_closest(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
-                                  terrain.terrain_scale, terrain.terrain_offset, center, start, start_sample, reach)
+                                  terrain.terrain_scale, terrain.terrain_offset, center, start, start_sample, reach,
+                                  jet, bounds)
 
 
 @wp.func
@@ -229,6 +259,7 @@ def collide_terrain(
     cull: int,
     refresh_spheres: int,
     face_search: int,
+    jet_search: int,
     # State in
     state_in: BodyState,
     # Solver in (the pose of the step's pass)
@@ -314,12 +345,17 @@ def collide_terrain(
                     k = slot - start
                     seed = float(0.0)
                     start_xz = wp.vec2(x[0], x[2])
-                    if contacts.terrain_contact_active[slot] != 0:
+                    warm = contacts.terrain_contact_active[slot]
+                    if warm != 0:
                         start_xz = contacts.terrain_contact_surface[slot]
                     elif k > 0:
                         seed = SEED_OFFSET * radius
                         start_xz = start_xz + seed * seed_direction(k)
-                    s0 = sample_at(terrain, start_xz)
+                    s0 = HeightSample()
+                    if warm != 0 and jet_search != 0:
+                        s0 = jet_at(terrain, start_xz)
+                    else:
+                        s0 = sample_at(terrain, start_xz)
                     reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
                     can_touch = True
                     if contacts.terrain_contact_active[slot] == 0:
@@ -327,10 +363,14 @@ def collide_terrain(
                         lower_bound = (x[1] - s0.height - terrain.terrain_slope_bound * seed) / gap_scale
                         can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
                     if can_touch:
-                        xz, s = closest_from(terrain, x, start_xz, s0)
+                        xz, s = closest_from(terrain, x, start_xz, s0, warm * jet_search)
                         surface = wp.vec3(xz[0], s.height, xz[1])
-                        if wp.length(x - surface) > reach:
-                            # the search did not improve on its starting point: use that one
+                        resolution = 1.0e-6 + 2.0e-7 * (wp.abs(x[0]) + wp.abs(x[2]))
+                        if wp.length(x - surface) > reach + resolution:
+                            # the search did not improve on its starting point: use that one.  Within
+                            # float32's resolution of the coordinates the two distances cannot be told
+                            # apart (a step of 0.2 mm shortens a 0.25 m ball's by 1e-7 m), and keeping
+                            # the start there left its normal up to 0.3 mm of surface behind
                             s = s0
                             xz = start_xz
                             surface = wp.vec3(start_xz[0], s0.height, start_xz[1])
@@ -340,7 +380,7 @@ def collide_terrain(
                                 # a further slot stopped at a saddle of F: search again from its
                                 # downhill side and keep what lies nearer
                                 start_2 = xz + (ESCAPE_OFFSET * radius) * escape
-                                xz_2, s_3 = closest_from(terrain, x, start_2, sample_at(terrain, start_2))
+                                xz_2, s_3 = closest_from(terrain, x, start_2, sample_at(terrain, start_2), 0)
                                 surface_2 = wp.vec3(xz_2[0], s_3.height, xz_2[1])
                                 if wp.length(x - surface_2) < wp.length(x - surface):
                                     xz = xz_2
