@@ -3,6 +3,7 @@
     python bench/line_profile.py                              # 10k mixed rain, the slab sweep module
     python bench/line_profile.py --module terrain_contact --count 2000
     python bench/line_profile.py --scene spheres --module soft_step     # the fused terrain-only step
+    python bench/line_profile.py --scene boxes --module terrain_contact  # boxes' terrain collision
 
 Warp compiles CPU kernels in memory (LLVM JIT), so a profiler sees only anonymous addresses, and
 timing launches (bench/versions.py) says which kernel is slow but not which line.  This script
@@ -54,8 +55,8 @@ count, steps = int(sys.argv[3]), int(sys.argv[4])
 if sys.argv[6] == "rain":
     sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase="grid", spacing=0.9, sleep=False,
                              rolling_resistance=0.2, contact_update="step", pair_schedule="domains")
-else:  # spheres on the terrain alone, the fused step, as bench/terrain_drop.py times them
-    sim = cases.terrain_drop(count, "sphere", dt=1.0 / 240.0, substeps=1)
+else:  # spheres or boxes on the terrain alone, the fused step, as bench/terrain_drop.py times them
+    sim = cases.terrain_drop(count, "sphere" if sys.argv[6] == "spheres" else "box", dt=1.0 / 240.0, substeps=1)
 sim.step(steps, check=False)
 entries = []
 for module in list(context.user_modules.values()):
@@ -116,8 +117,8 @@ def main(argv=None) -> int:
     p.add_argument("--count", type=int, default=10000)
     p.add_argument("--steps", type=int, default=130, help="steps simulated (the rain lands and piles)")
     p.add_argument("--module", default="solvers.domains", help="module whose lines are listed (a name's tail)")
-    p.add_argument("--scene", default="rain", choices=["rain", "spheres"],
-                   help="rain: the 10k mixed rain with body contact; spheres: spheres on the terrain alone "
+    p.add_argument("--scene", default="rain", choices=["rain", "spheres", "boxes"],
+                   help="rain: the 10k mixed rain with body contact; spheres, boxes: those on the terrain alone "
                         "(dt 1/240 s, the fused step, bench/terrain_drop.py's case)")
     p.add_argument("--top", type=int, default=30)
     p.add_argument("--frequency", type=int, default=499, help="samples a second")

@@ -12,6 +12,10 @@ fresh process per run, revisions alternating, ``--repeats`` times.  Each run rep
 body penetration probed every 0.1 s while the rain lands (``--settle`` s) and steps/s over the
 next ``--steps`` steps, so speed is always charted against the accuracy it bought.
 
+``--scene sphere`` or ``box`` times that shape on the terrain alone instead (bench/terrain_drop.py's
+scene: dt 1/240 s, one substep, the fused per-body step), where the stage split shows the
+terrain collision against ``solve_and_integrate``.
+
 A revision also runs its named variants (``VARIANTS``: SimConfig fields) when its SimConfig has
 those fields; an older revision without them runs its defaults only.  Writes
 ``bench/results/versions.{csv,json,png}`` (or ``--out-dir``).
@@ -56,7 +60,8 @@ VARIANTS = {
 # profiled run says little about where a difference comes from; each run therefore also records
 # its own ms a step per stage (solve sweeps, relax sweeps, each other kernel by name, timed around
 # warp_sim.launch) and its process CPU time, and the table gives medians over the repeats.
-STAGES = ("solve sweeps", "relax sweeps", "collide_terrain")
+STAGES = ("solve sweeps", "relax sweeps", "collide_terrain", "solve_and_integrate")
+SCENES = {"rain": "mixed bodies raining", "sphere": "spheres on the terrain alone", "box": "boxes on the terrain alone"}
 
 # runs in the child process, with the revision's tree first on sys.path
 CHILD = r"""
@@ -68,6 +73,7 @@ wp.config.log_level = wp.LOG_WARNING
 from warp_sim import SimConfig, cases
 count, settle, steps = int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 config = json.loads(sys.argv[5])
+scene = sys.argv[6]
 known = set(SimConfig.__dataclass_fields__)
 if not set(config) <= known:
     print(json.dumps({"status": "variant not in this revision"}))
@@ -106,12 +112,16 @@ for info in pkgutil.walk_packages(warp_sim.__path__, "warp_sim."):
         continue
     if getattr(module, "launch", None) is plain_launch:
         module.launch = timed_launch
-sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase="grid", spacing=0.9, sleep=False,
-                         rolling_resistance=0.2, contact_update="step", pair_schedule="domains", **config)
+if scene == "rain":
+    sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase="grid", spacing=0.9, sleep=False,
+                             rolling_resistance=0.2, contact_update="step", pair_schedule="domains", **config)
+else:  # bench/terrain_drop.py's scene: one shape on the terrain alone, dt 1/240 s, 1 substep
+    sim = cases.terrain_drop(count, scene, dt=1.0 / 240.0, substeps=1, **config)
 sim.step(1)
 peak = 0.0
+probe_steps = int(round(0.1 / sim.config.dt))
 for _ in range(int(round(settle * 10))):
-    sim.step(6, check=False)
+    sim.step(probe_steps, check=False)
     peak = max(peak, sim.max_penetration())
 timing[0] = True
 cpu_start = time.process_time()
@@ -166,11 +176,12 @@ def unpack(rev: str, into: Path) -> Path:
     return target
 
 
-def run_once(tree: Path, count: int, settle: float, steps: int, config: dict) -> dict:
-    return run_child([sys.executable, "-c", CHILD, str(tree), str(count), str(settle), str(steps), json.dumps(config)])
+def run_once(tree: Path, count: int, settle: float, steps: int, config: dict, scene: str = "rain") -> dict:
+    return run_child([sys.executable, "-c", CHILD, str(tree), str(count), str(settle), str(steps), json.dumps(config),
+                      scene])
 
 
-def chart(rows: list[dict], path: Path, title: str):
+def chart(rows: list[dict], path: Path, title: str, stepping: str = "dt 1/60, 4 substeps"):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -185,7 +196,7 @@ def chart(rows: list[dict], path: Path, title: str):
         depths = [1000 * r["peak_penetration_m"] for r in ok]
         ax.scatter(speeds, depths, color=palette[k % len(palette)], label=f"{rev}: {variant}", s=28)
         ax.plot([min(speeds), max(speeds)], [sum(depths) / len(depths)] * 2, color=palette[k % len(palette)], lw=1)
-    ax.set_xlabel("steps / s (dt 1/60, 4 substeps; each dot one run)")
+    ax.set_xlabel(f"steps / s ({stepping}; each dot one run)")
     ax.set_ylabel("peak penetration while landing [mm]")
     ax.set_title(title, fontsize=9)
     ax.grid(True, alpha=0.3)
@@ -205,6 +216,9 @@ def main(argv=None) -> int:
     p.add_argument("--settle", type=float, default=1.5, help="simulated seconds while the rain lands")
     p.add_argument("--steps", type=int, default=40)
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    p.add_argument("--scene", default="rain", choices=list(SCENES),
+                   help="rain: the mixed rain above; sphere, box: that shape on the terrain alone (bench/terrain_drop.py's "
+                        "scene, dt 1/240 s, 1 substep, the fused step), whose --steps should be a few hundred")
     p.add_argument("--out-dir", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     if args.count < 1 or args.repeats < 1 or args.steps < 1 or args.settle < 0:
@@ -227,11 +241,11 @@ def main(argv=None) -> int:
         for repeat in range(args.repeats):
             for rev in args.revs:  # alternating, so a slow spell of the machine hits every revision
                 for variant in args.variants:
-                    result = run_once(trees[rev], args.count, args.settle, args.steps, VARIANTS[variant])
+                    result = run_once(trees[rev], args.count, args.settle, args.steps, VARIANTS[variant], args.scene)
                     done += 1
                     if result["status"] == "variant not in this revision":
                         continue
-                    row = {"rev": rev, "variant": variant, "repeat": repeat, "bodies": args.count,
+                    row = {"rev": rev, "variant": variant, "scene": args.scene, "repeat": repeat, "bodies": args.count,
                            "steps_per_s": round(result.get("steps_per_s", 0.0), 3),
                            "peak_penetration_m": round(result.get("peak_penetration_m", 0.0), 6),
                            "substeps": result.get("substeps", ""),
@@ -247,7 +261,8 @@ def main(argv=None) -> int:
     csv_path, _ = write_rows("versions", rows, {**meta, "revs": args.revs, "settle_s": args.settle,
                                                 "steps": args.steps}, args.out_dir)
     chart(rows, csv_path.with_suffix(".png"),
-          f"{args.count} mixed bodies raining, back to back on {meta['cpu']} ({meta['cores']} cores)")
+          f"{args.count} {SCENES[args.scene]}, back to back on {meta['cpu']} ({meta['cores']} cores)",
+          "dt 1/60, 4 substeps" if args.scene == "rain" else "dt 1/240, 1 substep")
     return finish_report(summary(rows), csv_path, rows)
 
 

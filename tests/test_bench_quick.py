@@ -148,6 +148,21 @@ def test_versions_runs_two_revisions_back_to_back(tmp_path):
     assert (tmp_path / "versions.png").stat().st_size > 0
 
 
+def test_versions_times_a_shape_on_the_terrain_alone(tmp_path):
+    """--scene sphere: the fused terrain-only step, its split into the terrain collision and
+    solve_and_integrate."""
+    import csv
+
+    from bench import versions
+
+    assert versions.main(["--revs", versions.WORKTREE, "--count", "40", "--repeats", "1", "--settle", "0.1", "--steps",
+                          "5", "--variants", "defaults", "--scene", "sphere", "--out-dir", str(tmp_path)]) == 0
+    (row,) = list(csv.DictReader((tmp_path / "versions.csv").open()))
+    assert row["status"] == "ok" and row["scene"] == "sphere"
+    assert float(row["collide_terrain_ms"]) > 0 and float(row["solve_and_integrate_ms"]) > 0
+    assert float(row["solve_sweeps_ms"]) == 0.0
+
+
 def test_versions_names_a_revision_git_cannot_find(tmp_path, capsys):
     from bench import versions
 
