@@ -370,6 +370,7 @@ def sweep_converged(before: BodyVelocity, after: BodyVelocity, reach: float, tol
 
 @wp.func
 def as_matrix(inv_inertia: float) -> wp.mat33:
+    """The inverse inertia as a matrix, for impact_terrain (which takes one whatever the shape)."""
     return wp.diag(wp.vec3(inv_inertia))
 
 
@@ -439,8 +440,9 @@ def step_body(
 ):
     """One body's substep (the sequence of the module docstring), its world inertia and inverse
     either matrices or, for a sphere, the scalars they are: a sphere's inertia is isotropic, so
-    each I^-1 r product is three multiplications instead of a matrix product, and the fused
-    terrain-only step of a scene of spheres spends most of its time in those products."""
+    each I^-1 r product is three multiplications instead of a matrix product (R I^-1 R^T is not
+    formed at all), and the overloads below drop a sphere's drift and midpoint-rotation matrices.
+    A sphere's rows are the same algebra, differing from the matrix form by rounding only."""
     alpha = pre_kick_fraction(settings.integrator)
     vel = BodyVelocity()
     vel.v = state_in.body_vel[i] + (alpha * settings.h) * settings.gravity
@@ -468,7 +470,8 @@ def step_body(
     if touching != 0 and (e > 0.0 or settings.impacts_always != 0):
         # impacts act on the velocity the last solve left, without this substep's gravity
         v_last = state_in.body_vel[i] - ((1.0 - alpha) * settings.h) * settings.gravity
-        hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, as_matrix(inv_inertia), zero, wp.mat33(0.0), e, friction,
+        hit = impact_terrain(start, count, x, v_last, omega_free, inv_mass, as_matrix(inv_inertia), zero,
+                             wp.mat33(0.0), e, friction,
                              settings.h, settings.gravity, settings.restitution_threshold,
                              settings.h, 0.0,  # no pairs on this path: nothing shadows a terrain point
                              slots.terrain_contact_active, slots.terrain_contact_point,
@@ -509,7 +512,7 @@ def step_body(
     step = settings.h * vel.v + toi_shift
     x_new = x + step
     q_new, rot_new = turn_body(inv_inertia, q, rot, model.body_inv_inertia[i], new_angmom, settings.h,
-                                        settings.integrator, settings.rotation)
+                               settings.integrator, settings.rotation)
 
     if touching != 0:
         relax_bias = wp.where(e > 0.0, -1, 0)
