@@ -140,6 +140,13 @@ CULL_SLACK_RATE = 1.0e-7  # [m per m of |x| + |z|]
 
 
 @wp.func
+def search_resolution(x: float, z: float) -> float:
+    """[m] What the closest-point search resolves at (x, z): a few float32 ulps of the coordinates.
+    A step under it ends the search, and two distances closer than it cannot be told apart."""
+    return 1.0e-6 + 2.0e-7 * (wp.abs(x) + wp.abs(z))
+
+
+@wp.func
 def sphere_fourier_closest(
     terrain_coef: wp.array(dtype=wp.vec2),
     terrain_terms: int,
@@ -186,7 +193,7 @@ def sphere_fourier_closest(
             det = a * c - b * b
         step = wp.vec2((c * gx - b * gz) / det, (a * gz - b * gx) / det)
         length = wp.length(step)
-        tolerance = 1.0e-6 + 2.0e-7 * (wp.abs(xz[0]) + wp.abs(xz[1]))
+        tolerance = search_resolution(xz[0], xz[1])
         if length < tolerance:
             break
         full_newton = not gauss_newton
@@ -235,6 +242,20 @@ def closest_from(terrain: TerrainModel, center: wp.vec3, start: wp.vec2, start_s
                                   jet, bounds)
 
 
+@wp.func
+def closest_or_start(terrain: TerrainModel, center: wp.vec3, start: wp.vec2, start_sample: HeightSample,
+                     jet: int) -> tuple[wp.vec2, HeightSample]:
+    """closest_from, or the start itself where the search ended farther from the centre than the
+    start lies (it did not improve on it).  Within float32's resolution of the coordinates the two
+    distances cannot be told apart (a step of 0.2 mm shortens a 0.25 m ball's by 1e-7 m), and
+    keeping the start there left its normal up to 0.3 mm of surface behind."""
+    xz, s = closest_from(terrain, center, start, start_sample, jet)
+    reach = wp.length(center - wp.vec3(start[0], start_sample.height, start[1]))
+    if wp.length(center - wp.vec3(xz[0], s.height, xz[1])) > reach + search_resolution(center[0], center[2]):
+        return start, start_sample
+    return xz, s
+
+
 @wp.struct
 class Touch:
     """A sphere's contact at its touch (touch_ahead): surface point (x, z), normal, depth now."""
@@ -246,7 +267,7 @@ class Touch:
 
 @wp.func
 def touch_ahead(terrain: TerrainModel, x: wp.vec3, v: wp.vec3, h: float, xz: wp.vec2, s: HeightSample,
-                normal: wp.vec3, depth: float, radius: float, resolution: float) -> Touch:
+                normal: wp.vec3, depth: float, radius: float) -> Touch:
     """A sphere's contact where it will touch within the substep, not where its centre is now.
 
     A ball a gap g above the ground closing at v_n reaches it at t* = g / v_n.  Taken at the
@@ -267,13 +288,11 @@ def touch_ahead(terrain: TerrainModel, x: wp.vec3, v: wp.vec3, h: float, xz: wp.
     if depth >= 0.0 or closing <= 0.0 or -depth >= closing * h:
         return out
     t_touch = -depth / closing
-    if t_touch * wp.length(v) <= resolution:
+    if t_touch * wp.length(v) <= search_resolution(x[0], x[2]):
         return out
     ahead = x + t_touch * v
-    point, sample = closest_from(terrain, ahead, xz, s, 0)
+    point, sample = closest_or_start(terrain, ahead, xz, s, 0)
     surface = wp.vec3(point[0], sample.height, point[1])
-    if wp.length(ahead - surface) > wp.length(ahead - wp.vec3(xz[0], s.height, xz[1])) + resolution:
-        return out  # the search did not improve on its start (see the caller's guard)
     out.point = point
     out.normal = fourier_normal(sample.grad)
     out.depth = radius - wp.dot(x - surface, out.normal)
@@ -401,24 +420,14 @@ def collide_terrain(
                         s0 = jet_at(terrain, start_xz)
                     else:
                         s0 = sample_at(terrain, start_xz)
-                    reach = wp.length(x - wp.vec3(start_xz[0], s0.height, start_xz[1]))
                     can_touch = True
                     if contacts.terrain_contact_active[slot] == 0:
                         # the ground under the centre is at most slope_bound * seed above the seed's
                         lower_bound = (x[1] - s0.height - terrain.terrain_slope_bound * seed) / gap_scale
                         can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
                     if can_touch:
-                        xz, s = closest_from(terrain, x, start_xz, s0, warm * jet_search)
+                        xz, s = closest_or_start(terrain, x, start_xz, s0, warm * jet_search)
                         surface = wp.vec3(xz[0], s.height, xz[1])
-                        resolution = 1.0e-6 + 2.0e-7 * (wp.abs(x[0]) + wp.abs(x[2]))
-                        if wp.length(x - surface) > reach + resolution:
-                            # the search did not improve on its starting point: use that one.  Within
-                            # float32's resolution of the coordinates the two distances cannot be told
-                            # apart (a step of 0.2 mm shortens a 0.25 m ball's by 1e-7 m), and keeping
-                            # the start there left its normal up to 0.3 mm of surface behind
-                            s = s0
-                            xz = start_xz
-                            surface = wp.vec3(start_xz[0], s0.height, start_xz[1])
                         if k > 0:
                             escape = saddle_escape(s, x, k)
                             if wp.length(escape) > 0.0:
@@ -434,7 +443,7 @@ def collide_terrain(
                         normal = fourier_normal(s.grad)
                         depth = radius - wp.dot(x - surface, normal)
                         if count == 1:
-                            touch = touch_ahead(terrain, x, v, h, xz, s, normal, depth, radius, resolution)
+                            touch = touch_ahead(terrain, x, v, h, xz, s, normal, depth, radius)
                             xz = touch.point
                             normal = touch.normal
                             depth = touch.depth
