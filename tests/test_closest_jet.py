@@ -101,23 +101,35 @@ def search_kernel(terrain: TerrainModel, centers: wp.array(dtype=wp.vec3), start
     out_normal[i] = fourier_normal(s.grad)
 
 
-def oracle(terrain, c, p):
-    """Float64 Newton for the closest point from p (Hessian by central differences of the twin's
-    gradient, error ~1e-10 at 1e-5), and the unit normal there."""
+def closest_point(terrain, c, p):
+    """Float64 Newton for the surface point closest to c from p, stopped at convergence (the Hessian
+    by central differences of the twin's gradient, error ~1e-10 at 1e-5)."""
     p = np.array(p, float)
-    for _ in range(30):
+    for _ in range(40):
         g = np.array(terrain.gradient(p[0], p[1]), float).ravel()
         u = float(terrain.height(p[0], p[1])) - c[1]
         e = 1.0e-5
-        gx = (np.array(terrain.gradient(p[0] + e, p[1])).ravel() - np.array(terrain.gradient(p[0] - e, p[1])).ravel())
-        gz = (np.array(terrain.gradient(p[0], p[1] + e)).ravel() - np.array(terrain.gradient(p[0], p[1] - e)).ravel())
+        gx = np.array(terrain.gradient(p[0] + e, p[1])).ravel() - np.array(terrain.gradient(p[0] - e, p[1])).ravel()
+        gz = np.array(terrain.gradient(p[0], p[1] + e)).ravel() - np.array(terrain.gradient(p[0], p[1] - e)).ravel()
         hess = np.array([[gx[0], gz[0]], [gx[1], gz[1]]]) / (2.0 * e)
-        hess = 0.5 * (hess + hess.T)
-        grad_f = np.array([p[0] - c[0] + u * g[0], p[1] - c[2] + u * g[1]])
-        p = p - np.linalg.solve(np.eye(2) + np.outer(g, g) + u * hess, grad_f)
+        step = np.linalg.solve(np.eye(2) + np.outer(g, g) + u * 0.5 * (hess + hess.T),
+                               np.array([p[0] - c[0] + u * g[0], p[1] - c[2] + u * g[1]]))
+        p = p - step
+        if np.linalg.norm(step) < 1.0e-13:
+            break
+    return p
+
+
+def unit_normal(terrain, p) -> np.ndarray:
     g = np.array(terrain.gradient(p[0], p[1]), float).ravel()
     n = np.array([-g[0], 1.0, -g[1]])
-    return p, n / np.linalg.norm(n)
+    return n / np.linalg.norm(n)
+
+
+def oracle(terrain, c, p):
+    """The closest point to c (closest_point, from p) and the unit normal there."""
+    point = closest_point(terrain, c, p)
+    return point, unit_normal(terrain, point)
 
 
 def moved_spheres(terrain, count: int, move: tuple[float, float], seed: int):

@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from test_closest_jet import closest_point, unit_normal
 from warp_sim import FourierTerrain, ModelBuilder, SimConfig, Simulator, cases
 from warp_sim.builder import Material
 
@@ -23,24 +24,6 @@ TERRAINS = {
 RADIUS = 0.2
 
 
-def closest(terrain, c, p):
-    """Float64 Newton for the surface point closest to c from p, stopped at convergence (the
-    Hessian by central differences of the twin's gradient, as test_closest_jet.oracle)."""
-    for _ in range(40):
-        g = np.array(terrain.gradient(p[0], p[1]), float).ravel()
-        u = float(terrain.height(p[0], p[1])) - c[1]
-        e = 1.0e-5
-        gx = np.array(terrain.gradient(p[0] + e, p[1])).ravel() - np.array(terrain.gradient(p[0] - e, p[1])).ravel()
-        gz = np.array(terrain.gradient(p[0], p[1] + e)).ravel() - np.array(terrain.gradient(p[0], p[1] - e)).ravel()
-        hess = np.array([[gx[0], gz[0]], [gx[1], gz[1]]]) / (2.0 * e)
-        step = np.linalg.solve(np.eye(2) + np.outer(g, g) + u * 0.5 * (hess + hess.T),
-                               np.array([p[0] - c[0] + u * g[0], p[1] - c[2] + u * g[1]]))
-        p = p - step
-        if np.linalg.norm(step) < 1.0e-13:
-            break
-    return p
-
-
 def touch(terrain, c0, v):
     """(time, unit normal) where the ball starting at c0 with velocity v first touches (float64):
     conservative advancement (the distance to the surface falls no faster than |v|, so a step of
@@ -50,7 +33,7 @@ def touch(terrain, c0, v):
     def gap(t):
         nonlocal p
         c = c0 + v * t
-        p = closest(terrain, c, p)
+        p = closest_point(terrain, c, p)
         return np.linalg.norm(c - np.array([p[0], terrain.height(p[0], p[1]), p[1]])) - RADIUS
 
     speed = np.linalg.norm(v)
@@ -65,9 +48,7 @@ def touch(terrain, c0, v):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if gap(mid) > 0.0 else (lo, mid)
     gap(hi)
-    g = np.array(terrain.gradient(p[0], p[1]), float).ravel()
-    n = np.array([-g[0], 1.0, -g[1]])
-    return hi, n / np.linalg.norm(n)
+    return hi, unit_normal(terrain, p)
 
 
 @pytest.mark.parametrize("partner", [False, True], ids=["alone", "with_a_partner"])
