@@ -182,6 +182,27 @@ def test_finalize_names_a_bad_device():
     assert b.finalize(wp.get_device("cpu")).body_count == 1
 
 
+def test_simulator_names_a_device_other_than_the_models(device):
+    """SimConfig's device must be the model's: one this machine lacks, or another than the model
+    was finalized on, is named with both, before anything is allocated (Warp would say only
+    'Invalid device identifier', or fail at the first launch)."""
+    import warp as wp
+
+    b = ModelBuilder()
+    b.add_sphere(0.1, 1.0)
+    model = b.finalize(device)
+    alias = wp.get_device(device).alias
+    missing = f"cuda:{wp.get_cuda_device_count()}"
+    with pytest.raises(ValueError, match=rf"^SimConfig device '{missing}' is not available \(\d+ CUDA devices "
+                                         rf"found\); the model is on '{alias}'$"):
+        Simulator(model, SimConfig(device=missing))
+    if wp.get_cuda_device_count() > 0:
+        other = "cpu" if alias != "cpu" else "cuda:0"
+        with pytest.raises(ValueError, match=rf"^SimConfig device '{other}' is not the model's device '{alias}'"):
+            Simulator(model, SimConfig(device=other))
+    assert Simulator(model, SimConfig(device=device)).device == wp.get_device(device)
+
+
 def test_bodies_view_round_trips():
     """builder.bodies gives one dict per body and can be assigned back (the demo does)."""
     b = ModelBuilder()

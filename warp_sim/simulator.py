@@ -94,6 +94,23 @@ class ReferencePose:
     body_angmom: wp.array
 
 
+def simulation_device(model: Model, config: SimConfig):
+    """The Warp device of ``config.device``, which must be the one the model was finalized on: a
+    mismatch would otherwise surface as a launch error deep inside the first step."""
+    from .validation import ValidationError
+
+    model_device = wp.get_device(model.device)
+    try:
+        device = wp.get_device(config.device)
+    except (ValueError, RuntimeError):
+        raise ValidationError(f"SimConfig device {config.device!r} is not available ({wp.get_cuda_device_count()} "
+                              f"CUDA devices found); the model is on {model_device.alias!r}") from None
+    if device != model_device:
+        raise ValidationError(f"SimConfig device {config.device!r} is not the model's device {model_device.alias!r}: "
+                              f"finalize the builder on {config.device!r}, or set device = {model_device.alias!r}")
+    return device
+
+
 class Simulator:
     # Skip box checkpoints that provably cannot reach the Fourier surface (collide/terrain_contact.py).
     # It changes no result; tests turn it off to check exactly that.
@@ -109,10 +126,10 @@ class Simulator:
         config.validate()  # fields may have been set after construction
         from .limits import check_simulator_memory, warn_heavy_gravity
 
+        self.device = simulation_device(model, config)
         check_simulator_memory(model, config)  # before allocating contact buffers the machine lacks
         self.model = model
         self.config = config
-        self.device = wp.get_device(config.device)
         self.use_graph = self.device.is_cuda if config.graph is None else bool(config.graph)
         if self.use_graph and config.pair_schedule == "domains":
             raise ValueError("pair_schedule 'domains' reads its slab counts back and cannot be captured; "
