@@ -69,7 +69,9 @@ def discrete_bounce_apex(restitution, drop, dt, substeps, threshold):
     """Float64 twin of what the solver is meant to compute for a body dropped on a plane: semi-
     implicit Euler per substep, and an impact taken at its time t* within the substep (impact.py:
     Poisson's e on the speed gravity has grown by t*, the position shifted to the piecewise
-    motion).  Returns the first rebound's apex sampled at the steps, as the simulation is."""
+    motion); a substep without one leaves the body untouched, so it drifts on the parabola
+    (integrate.free_drift).  Returns the first rebound's apex sampled at the steps, as the
+    simulation is."""
     h, g = dt / substeps, -G
     y, v, apex, rising = drop, 0.0, 0.0, False
     for _ in range(100_000):
@@ -83,7 +85,7 @@ def discrete_bounce_apex(restitution, drop, dt, substeps, threshold):
                 y = y + h * v + shift
             else:
                 v = v + g * h
-                y = y + h * v
+                y = y + h * v - 0.5 * g * h * h
         rising = rising or v > 0.0
         if rising:
             apex = max(apex, y)

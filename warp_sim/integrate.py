@@ -16,6 +16,17 @@ substep, so every integrator is a "kick - drift - kick" with pre-kick fraction a
 
 so the contact solver always works on the velocity that moves the body.
 
+``semi_implicit``, the default, kicks the whole substep's gravity before the contacts so that a
+body they hold keeps a stored velocity of 0 (under alpha = 1/2 a resting body reads g h / 2).
+Its drift x + h (v + g h) then runs g h^2 / 2 ahead of the parabola every substep, which in
+flight is a steady loss of energy, m g^2 h / 2 a second: a ball bouncing with e = 1 on the
+terrain lost 12 % of its energy in 10 s at the defaults (2 m drops), and a projectile lands
+g t h / 2 short of where it should.  A body that no contact touched in the substep (its solved
+velocity is exactly the kicked one, nothing turned it, no impact struck it: ``free_drift``) has
+only gravity acting on it, so its drift is taken as the parabola's, x + h v + g h^2 / 2, exact.
+A body any contact touched keeps symplectic Euler's drift, whose velocity is the one the solve
+left: what the contacts hold is not moved by the correction.
+
 Rotation: the ODE Y' = f(Y) for Y = R (matrix modes, f = skew(omega(R)) R) or Y = q
 (quaternion mode, f = 1/2 [omega, 0] q) is stepped with the integrator's own scheme:
 
@@ -72,6 +83,20 @@ def pre_kick_fraction(integrator: int) -> float:
     if integrator == INTEGRATOR_SEMI_IMPLICIT:
         return 1.0
     return 0.5
+
+
+@wp.func
+def same_vector(a: wp.vec3, b: wp.vec3) -> bool:
+    return a[0] == b[0] and a[1] == b[1] and a[2] == b[2]
+
+
+@wp.func
+def free_drift(integrator: int, untouched: bool, gravity: wp.vec3, h: float) -> wp.vec3:
+    """What a ``semi_implicit`` drift of a body no contact touched this substep is moved by so that
+    it follows the parabola exactly: -g h^2 / 2 (module docstring); nothing otherwise."""
+    if integrator == INTEGRATOR_SEMI_IMPLICIT and untouched:
+        return (-0.5 * h * h) * gravity
+    return wp.vec3(0.0)
 
 
 @wp.func

@@ -45,7 +45,8 @@ import warp as wp
 from ..collide.contact_patch import NO_TWIST, terrain_patch, twist_arm
 from ..column_sag import contact_hertz as contact_frequency
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
-from ..integrate import cayley_quat, integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
+from ..integrate import (cayley_quat, free_drift, integrate_rotation, pre_kick_fraction, same_vector, world_inertia,
+                         world_inv_inertia)
 from ..types import INTEGRATOR_SEMI_IMPLICIT, ROTATION_QUATERNION, SHAPE_BOX, SHAPE_SPHERE
 from .contact_rows import closed_contact_bias, closed_during_substep
 from .impact_terrain import impact_terrain
@@ -466,6 +467,7 @@ def step_body(
     zero = wp.vec3(0.0)
     still = no_turn(inv_inertia)
     toi_shift = wp.vec3(0.0)
+    struck = int(0)
     e = model.body_restitution[i]
     if touching != 0 and (e > 0.0 or settings.impacts_always != 0):
         # impacts act on the velocity the last solve left, without this substep's gravity
@@ -480,6 +482,8 @@ def step_body(
         vel.v = hit.v + settings.h * settings.gravity
         vel.w = hit.w
         toi_shift = hit.shift  # the body reaches the contact at t*, not at the substep's start (impact.py)
+        struck = hit.hit
+    kicked = vel  # what the contact rows below start from
 
     # Warm start
     # friction acts at the arms of the patch the carried impulses make (contact_patch.py), for the substep
@@ -509,7 +513,10 @@ def step_body(
     new_angmom = angmom
     if touching != 0:
         new_angmom = angmom + inertia * (vel.w - omega_free)
-    step = settings.h * vel.v + toi_shift
+    # a body no contact touched (no impact, its rows left its velocity as it was, bit for bit) has
+    # only gravity acting: its drift is the parabola's
+    untouched = struck == 0 and same_vector(vel.v, kicked.v) and same_vector(vel.w, kicked.w)
+    step = settings.h * vel.v + toi_shift + free_drift(settings.integrator, untouched, settings.gravity, settings.h)
     x_new = x + step
     q_new, rot_new = turn_body(inv_inertia, q, rot, model.body_inv_inertia[i], new_angmom, settings.h,
                                settings.integrator, settings.rotation)

@@ -35,7 +35,7 @@ import warp as wp
 
 from ..collide.contact_patch import NO_TWIST, terrain_patch
 from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
-from ..integrate import integrate_rotation, pre_kick_fraction, world_inertia, world_inv_inertia
+from ..integrate import free_drift, integrate_rotation, pre_kick_fraction, same_vector, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import solve_terrain_row
 from .soft_step import (BodyVelocity, apply_contact_impulse, apply_impulse, drift_rotation, solve_rolling,
@@ -323,8 +323,12 @@ def integrate_body(
     angmom = state_in.body_angmom[i] + world_inertia(rot, model.body_inertia[i]) * (w - solver.solver_w0[i])
     q_new, rot_new = integrate_rotation(q, rot, model.body_inv_inertia[i], angmom, settings.h,
                                         settings.integrator, settings.rotation)
-    # the impacts' time-of-impact shift (impact.py), spent here: zero unless this substep had one
-    step = settings.h * v + solver.solver_toi_shift[i]
+    # the impacts' time-of-impact shift (impact.py), spent here: zero unless this substep had one;
+    # a body nothing touched (its velocity still the kicked one, bit for bit) drifts on the parabola
+    kicked = state_in.body_vel[i] + (pre_kick_fraction(settings.integrator) * settings.h) * settings.gravity
+    untouched = solver.solver_impact_stamp[i] < 0 and same_vector(v, kicked) and same_vector(w, solver.solver_w0[i])
+    step = settings.h * v + solver.solver_toi_shift[i] + free_drift(settings.integrator, untouched, settings.gravity,
+                                                                     settings.h)
     solver.solver_toi_shift[i] = wp.vec3(0.0)
     x_new = x + step
     state_out.body_pos[i] = x_new
