@@ -20,15 +20,23 @@ Hessian K, along the face directions' horizontal parts e_h):
 
     d_a = g . e_a,h - e_a,y,      d_ab = e_a,h^T K e_b,h.
 
-A climb step is one projected Gauss-Seidel pass of Newton's method on that quadratic model, one
-concave axis at a time, each clamped to the cell (a 2-D Newton step clamped to the cell is not the
-cell's top when the crest's own top lies outside it).  A step that does not climb is cut to a
-quarter and tried again: along a barely concave axis the model predicts a far top that is not
-there.
+A climb step is one projected Gauss-Seidel pass over the two axes, each clamped to the cell (a
+2-D step clamped to the cell is not the cell's top when the crest's own top lies outside it).
+Along an axis of slope g and curvature k the step is the one that maximises what Taylor's
+theorem promises the depth gains, g t + k t^2 / 2 - T |t|^3 / 6 (T bounding the third
+derivatives, ``sure_step``): where the curvature dominates it is the quadratic model's Newton
+step, and where the curvature is weak it is no longer than the bound still promises a climb.
+The Newton step alone went to the cell's end along a barely concave axis, towards a top the
+model imagines beyond it: a cube of half 0.25 m resting on the default terrain moved its
+checkpoint 0.125 m into the face that way, off the face's edge, under which a crest stood 0.87
+mm deep while its contacts said 0.05.  A step that does not climb is cut to a quarter and tried
+again.
 
-Only concave directions climb: along a linear or convex one, d's largest value over a cell lies
-at one of the cell's ends, which the neighbouring checkpoints (or the face's edge, where the
-cell is clamped) already bound from above, so a box on flat or hollow ground is solved as before.
+Directions climb where d is concave, or convex by less than T r (r the cell's reach that way),
+where the curvature can turn within the cell and a crest stand between the checkpoint and the
+cell's end.  Along a direction convex by more than that, d's largest value over a cell lies at
+one of the cell's ends, which the neighbouring checkpoints (or the face's edge, where the cell
+is clamped) already bound from above, so a box on flat or hollow ground is solved as before.
 
 The contact stays at the checkpoint, with the checkpoint's normal; only its depth grows.  Moving
 the contact to the crest instead let its point slide between cells as a box rocked, carrying the
@@ -136,6 +144,19 @@ def cell_rise(center: HeightSample, arm: wp.vec3, rot: wp.mat33, face: wp.vec2i,
             + 0.5 * k_norm * reach * reach + cubic_bound * ((r + reach) * (r + reach) * (r + reach) - r * r * r) / 6.0)
 
 
+@wp.func
+def sure_step(slope: float, curvature: float, cubic: float) -> float:
+    """The step along an axis that maximises the least the depth can gain by Taylor's theorem,
+    g t + k t^2 / 2 - T |t|^3 / 6 (t along the slope g; T bounds the third derivative): t =
+    (k + sqrt(k^2 + 2 T |g|)) / T.  Where the curvature dominates it is the quadratic model's
+    Newton step -g / k; where it is weak, or convex, it is as far as the bound still promises a
+    climb, never to a top the model only imagines beyond it."""
+    if slope == 0.0 or cubic <= 0.0:
+        return wp.where(curvature < 0.0 and cubic <= 0.0, -slope / curvature, 0.0)
+    t = (curvature + wp.sqrt(curvature * curvature + 2.0 * cubic * wp.abs(slope))) / cubic
+    return wp.where(slope > 0.0, t, -t)
+
+
 @wp.struct
 class CellPoint:
     """What a cell's climb found: the depth of the deepest point it reached, the checkpoint's own
@@ -181,13 +202,20 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
     best.start_depth = best.depth
     reach_a = wp.max(-bounds_a[0], bounds_a[1])
     reach_b = wp.max(-bounds_b[0], bounds_b[1])
-    concave_a = wp.max(-curvature(s, ea, ea), 0.0)
-    concave_b = wp.max(-curvature(s, eb, eb), 0.0)
+    k_a = curvature(s, ea, ea)
+    k_b = curvature(s, eb, eb)
+    concave_a = wp.max(-k_a, 0.0)
+    concave_b = wp.max(-k_b, 0.0)
     best.chord_bound = 0.5 * (concave_a * reach_a * reach_a + concave_b * reach_b * reach_b)
-    if best.chord_bound <= 0.0:
+    # an axis convex at the checkpoint can turn concave within the cell where T reach outweighs
+    # its curvature (module docstring)
+    cubic = terrain.terrain_cubic_bound
+    turns_a = k_a >= 0.0 and k_a < cubic * reach_a
+    turns_b = k_b >= 0.0 and k_b < cubic * reach_b
+    if best.chord_bound <= 0.0 and not turns_a and not turns_b:
         return best
     # no point of the cell is more concave than the checkpoint by over T (reach_a + reach_b)
-    spread = terrain.terrain_cubic_bound * (reach_a + reach_b)
+    spread = cubic * (reach_a + reach_b)
     if best.depth + 0.5 * ((concave_a + spread) * reach_a * reach_a + (concave_b + spread) * reach_b * reach_b) < -window:
         return best
     best_sample = s
@@ -201,11 +229,11 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
         # one projected Gauss-Seidel pass on the quadratic model, a concave axis at a time (a 2-D
         # Newton step clamped to a corner's cell went to the cell's far end, 0.8 mm short of its top)
         moved = offset
-        if haa < 0.0:
-            moved = wp.vec2(wp.clamp(offset[0] - ga / haa, bounds_a[0], bounds_a[1]), offset[1])
-        if hbb < 0.0:
+        if haa < cubic * reach_a:
+            moved = wp.vec2(wp.clamp(offset[0] + sure_step(ga, haa, cubic), bounds_a[0], bounds_a[1]), offset[1])
+        if hbb < cubic * reach_b:
             slope_b = gb + hab * (moved[0] - offset[0])
-            moved = wp.vec2(moved[0], wp.clamp(offset[1] - slope_b / hbb, bounds_b[0], bounds_b[1]))
+            moved = wp.vec2(moved[0], wp.clamp(offset[1] + sure_step(slope_b, hbb, cubic), bounds_b[0], bounds_b[1]))
         step = scale * (moved - offset)
         # the quadratic model's gain over the step, and how far the model can be off over it
         # (T |step|^3 / 6, T bounding the third derivatives): a step that gains under
