@@ -32,11 +32,11 @@ checkpoint 0.125 m into the face that way, off the face's edge, under which a cr
 mm deep while its contacts said 0.05.  A step that does not climb is cut to a quarter and tried
 again.
 
-Directions climb where d is concave, or convex by less than T r (r the cell's reach that way),
-where the curvature can turn within the cell and a crest stand between the checkpoint and the
-cell's end.  Along a direction convex by more than that, d's largest value over a cell lies at
-one of the cell's ends, which the neighbouring checkpoints (or the face's edge, where the cell
-is clamped) already bound from above, so a box on flat or hollow ground is solved as before.
+Directions climb where d is concave, or where it is convex but turns soon enough that a top can
+stand within the cell (``may_climb``: its slope g can vanish within the cell's reach r only if
+|g| + k r <= T r^2 / 2).  Along any other direction d rises all the way to one of the cell's
+ends, which the neighbouring checkpoints (or the face's edge, where the cell is clamped) already
+bound from above, so a box on flat or hollow ground is solved as before.
 
 The contact stays at the checkpoint, with the checkpoint's normal; only its depth grows.  Moving
 the contact to the crest instead let its point slide between cells as a box rocked, carrying the
@@ -145,6 +145,15 @@ def cell_rise(center: HeightSample, arm: wp.vec3, rot: wp.mat33, face: wp.vec2i,
 
 
 @wp.func
+def may_climb(slope: float, curvature: float, cubic: float, reach: float) -> bool:
+    """Whether d can rise to a top within ``reach`` along an axis: concave, or convex yet turning
+    soon enough that its slope can vanish there (|g| + k r <= T r^2 / 2, T bounding the third
+    derivatives).  Otherwise d climbs all the way to the cell's end, which the neighbouring
+    checkpoint or the face's edge bounds."""
+    return curvature < 0.0 or wp.abs(slope) + curvature * reach <= 0.5 * cubic * reach * reach
+
+
+@wp.func
 def sure_step(slope: float, curvature: float, cubic: float) -> float:
     """The step along an axis that maximises the least the depth can gain by Taylor's theorem,
     g t + k t^2 / 2 - T |t|^3 / 6 (t along the slope g; T bounds the third derivative): t =
@@ -207,12 +216,8 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
     concave_a = wp.max(-k_a, 0.0)
     concave_b = wp.max(-k_b, 0.0)
     best.chord_bound = 0.5 * (concave_a * reach_a * reach_a + concave_b * reach_b * reach_b)
-    # an axis convex at the checkpoint can turn concave within the cell where T reach outweighs
-    # its curvature (module docstring)
     cubic = terrain.terrain_cubic_bound
-    turns_a = k_a >= 0.0 and k_a < cubic * reach_a
-    turns_b = k_b >= 0.0 and k_b < cubic * reach_b
-    if best.chord_bound <= 0.0 and not turns_a and not turns_b:
+    if not may_climb(along(s, ea), k_a, cubic, reach_a) and not may_climb(along(s, eb), k_b, cubic, reach_b):
         return best
     # no point of the cell is more concave than the checkpoint by over T (reach_a + reach_b)
     spread = cubic * (reach_a + reach_b)
@@ -226,13 +231,13 @@ def deepest_in_cell(terrain: TerrainModel, base: wp.vec3, rot: wp.mat33, local: 
         haa = curvature(s, ea, ea)
         hab = curvature(s, ea, eb)
         hbb = curvature(s, eb, eb)
-        # one projected Gauss-Seidel pass on the quadratic model, a concave axis at a time (a 2-D
-        # Newton step clamped to a corner's cell went to the cell's far end, 0.8 mm short of its top)
+        # one projected Gauss-Seidel pass, an axis that may climb at a time (a 2-D Newton step
+        # clamped to a corner's cell went to the cell's far end, 0.8 mm short of its top)
         moved = offset
-        if haa < cubic * reach_a:
+        if may_climb(ga, haa, cubic, reach_a):
             moved = wp.vec2(wp.clamp(offset[0] + sure_step(ga, haa, cubic), bounds_a[0], bounds_a[1]), offset[1])
-        if hbb < cubic * reach_b:
-            slope_b = gb + hab * (moved[0] - offset[0])
+        slope_b = gb + hab * (moved[0] - offset[0])
+        if may_climb(slope_b, hbb, cubic, reach_b):
             moved = wp.vec2(moved[0], wp.clamp(offset[1] + sure_step(slope_b, hbb, cubic), bounds_b[0], bounds_b[1]))
         step = scale * (moved - offset)
         # the quadratic model's gain over the step, and how far the model can be off over it
