@@ -30,12 +30,16 @@ A sleeping body counts as static for the rest of the pipeline (inverse mass 0 in
 kernels read), so terrain contact, broad phase, narrow phase and solver all skip it: that is
 where the saving comes from.  Its velocity is zeroed when it falls asleep.
 
-* a sleeping body that an awake one touches wakes before the solve of that same step (Box2D
-  wakes an island when one of its contacts begins touching): the pairs are found, the touched
-  sleepers marked and woken, and the collision pass is run again, so the woken bodies' terrain
-  contacts and their pairs with other sleepers take part in the step.  That second pass runs only
-  in steps where something woke (a device flag, ``wp.capture_if``: no host read).  A woken body's
-  other sleeping neighbours act as static for that step and wake through the timers at its end.
+* a sleeping body that an awake one touches wakes before the solve of that same step, and so
+  does every sleeper that touches it, and so on (Box2D wakes an island when one of its contacts
+  begins touching): the pairs are found, the touched sleepers marked and woken, and the collision
+  pass is run again, so the woken bodies' terrain contacts and their pairs with other sleepers
+  take part in the step; the sleepers those pairs reach are woken in turn, until a pass wakes
+  nobody (a device flag, ``wp.capture_while``: no host read).  So the extra passes run only in
+  steps where something woke, one per contact of the deepest chain the wake crosses.  When only
+  the touched sleepers woke and their sleeping neighbours acted as static for that step, a ball
+  at 3 m/s (e = 1) striking a sleeping row of four touching balls bounced back off it at 3 m/s,
+  the momentum reversed.
 
 Neighbour timers come from the last substep's contact pairs, one thread per pair, the minimum
 taken with atomics (the same result whatever the order; on the CPU these launches run whole on
@@ -217,11 +221,16 @@ class Sleep:
         self.woken = wp.zeros(1, dtype=wp.int32, device=device)
 
     def wake_touched(self, contacts, recollide):
-        """Before the solve: wake the sleepers that an awake body touches, then, only if any woke,
-        run ``recollide()`` (the collision pass again, now with them awake)."""
-        m = self.model
+        """Before the solve: wake the sleepers that an awake body touches and, while any woke, run
+        ``recollide()`` (the collision pass again, now with them awake) and wake the sleepers those
+        touch, so a blow meets the whole sleeping island it reaches (module docstring)."""
         if contacts.pair_max == 0:
             return
+        self._wake_round(contacts)
+        wp.capture_while(self.woken, self._recollide_and_wake, contacts=contacts, recollide=recollide)
+
+    def _wake_round(self, contacts):
+        m = self.model
         self.woken.zero_()
         # atomics: one launch, never split into CPU chunks (launch.py: Warp's CPU atomics are plain
         # read-modify-writes, so chunks on two threads would race)
@@ -230,7 +239,10 @@ class Sleep:
             self.body_inv_mass_awake, self.body_sleep_timer, self.body_wake, self.woken])
         launch(wake_marked, m.body_count, key=self, inputs=[
             m.body_inv_mass, self.body_wake, self.body_sleep_timer, self.body_inv_mass_awake], device=self.device)
-        wp.capture_if(self.woken, on_true=recollide)
+
+    def _recollide_and_wake(self, contacts, recollide):
+        recollide()
+        self._wake_round(contacts)
 
     def update(self, state, dt: float, contacts=None):
         """After a step: gather neighbour timers over the contact pairs, then decide per body."""
