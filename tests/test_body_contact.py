@@ -269,16 +269,20 @@ def test_a_column_standing_inside_a_table_edge_stands_and_one_outside_falls(coun
     assert column_at_a_table_edge(count, half, -0.02, weights, device) > 30.0
 
 
-@pytest.mark.parametrize("masses", [
-    "equal",
-    pytest.param("random", marks=pytest.mark.xfail(strict=True, reason=(
-        "known limitation (README, design notes: stacks at an edge): a column of six blocks of unequal "
-        "masses 5 mm inside a table's edge topples")))])
-def test_a_column_of_six_five_mm_inside_a_table_edge_stands(masses, device):
-    """Statics says it stands (its centre 0.5 % of a block's length inside the edge).  Measured:
-    equal masses stand (0.08 degrees after 3 s; they fell past 78 degrees until a cold contact's
-    friction acted at the patch's arms, collide/contact_patch.py), the random masses fall past 40 degrees
-    (2.5 mm inside: every column of six tried)."""
-    rng = np.random.default_rng(6)
-    weights = np.ones(6) if masses == "equal" else rng.uniform(0.5, 2.0, 6)
+EDGE_TOPPLES = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, design notes: stacks at an edge): a column of six blocks of unequal masses 5 mm "
+    "inside a table's edge topples (measured for these masses)"))
+
+
+@pytest.mark.parametrize("seed", [None] + [pytest.param(seed, marks=EDGE_TOPPLES) if seed in (2, 3) else seed
+                                           for seed in range(1, 9)])
+def test_a_column_of_six_five_mm_inside_a_table_edge_stands(seed, device):
+    """Statics says it stands (its centre 0.5 % of a block's length inside the edge); ``seed`` draws
+    the six masses from 0.5 to 2 kg (None: equal).  Measured: equal masses stand (0.08 degrees after
+    3 s; they fell past 78 degrees until a cold contact's friction acted at the patch's arms,
+    collide/contact_patch.py); of eight random columns, 3 fell past 40 degrees while a pair met its
+    blow with one pass a sweep, and 2 (other ones) since it sweeps on until converged
+    (pair_solve.solve_pair_points): 5 mm is at the method's resolution, not inside it; 2.5 mm inside,
+    every column of six tried falls."""
+    weights = np.ones(6) if seed is None else np.random.default_rng(seed).uniform(0.5, 2.0, 6)
     assert column_at_a_table_edge(6, (0.5, 0.1, 0.2), 0.005, weights, device) < 1.0

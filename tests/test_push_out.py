@@ -138,18 +138,26 @@ def column(count: int, depth: float, pushed: int):
     return b
 
 
-@pytest.mark.xfail(strict=True, reason="known limitation (README, design notes: push-out across a chain): the walk "
-                   "to the ground covers a pair and its own bodies' terrain rows, so a partner lighter than the "
-                   "pushed box, or a chain of three bodies or more, is left to the relax's Gauss-Seidel")
-@pytest.mark.parametrize("pair_schedule", ["domains", "colors"])
-@pytest.mark.parametrize("scene", ["partner 0.1 kg", "partner 0.3 kg", "3 cubes, top pushed", "3 cubes, middle pushed",
-                                   "4 cubes, top pushed"])
+CHAIN_LEFT = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, design notes: push-out across a chain): the walk to the ground covers a pair and its "
+    "own bodies' terrain rows, so a partner lighter than the pushed box, or a chain of three bodies or more, is left "
+    "to the relax's Gauss-Seidel"))
+CHAIN_CASES = [(schedule, scene) for schedule in ("domains", "colors")
+               for scene in ("partner 0.1 kg", "partner 0.3 kg", "3 cubes, top pushed", "3 cubes, middle pushed",
+                             "4 cubes, top pushed")]
+
+
+@pytest.mark.parametrize("pair_schedule, scene", [
+    pytest.param(*case, marks=()) if case == ("colors", "partner 0.3 kg") else pytest.param(*case, marks=CHAIN_LEFT)
+    for case in CHAIN_CASES])
 def test_push_out_through_a_longer_chain_leaves_under_ten_tolerances(pair_schedule, scene, device):
     """The same law where the walk does not reach: a lighter partner (the walk's passes hand the push
     down by m / (M + m) of it each, so 15 passes leave most of it) and columns of three and four
-    cubes (the pushed pair's partner rests on another body, not on the ground).  Measured: 0.01 to
-    1.0 m/s, the middle cube of three pushed out of the bottom one throwing the top cube at 1 m/s.
-    Strict, so a fix shows here."""
+    cubes (the pushed pair's partner rests on another body, not on the ground).  Measured: 0.003 to
+    1.1 m/s, the middle cube of three pushed out of the bottom one throwing the top cube at 1 m/s.
+    The 0.3 kg partner on the colour schedule meets the bound (0.0029 against 0.0041 m/s) since a
+    pair whose first solve pass takes a blow sweeps on until converged (pair_solve.solve_pair_points;
+    0.020 before); on the slab schedule it reads 0.0043.  Strict, so a fix shows here."""
     if pair_schedule == "domains" and device != "cpu":
         pytest.skip("the slab schedule runs on the CPU only")
     config = SimConfig(sleep=False, allow_initial_overlap=True, pair_schedule=pair_schedule, device=device)

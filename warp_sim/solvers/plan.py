@@ -5,7 +5,8 @@ After Box2D v3's solver stages (one list, consumed by each scheduler).  One subs
     [impact begin, pair contact times,                                 only with impacts
      JOINT_ROUNDS compression rounds and one bounce sweep of the impacts closing at the start
      (impact_joint.py; the slab schedule runs them as one launch at the first round),
-     IMPACT_SWEEPS rounds of sequential impact sweeps (impact.py), after-impacts hook]
+     IMPACT_SWEEPS rounds of sequential impact sweeps (impact.py), then two more rounds at a time
+     while a blow is still travelling (IMPACT_TRAVEL), after-impacts hook]
     prepare, warm start
     `iterations` solve sweeps (soft bias)
     integrate
@@ -31,11 +32,16 @@ from .impact_joint import JOINT_ROUNDS
 from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_RELAX, MODE_RELAX_CLOSED, MODE_SOLVE,
                          MODE_WARM_START)
 
-IMPACT_BEGIN, IMPACT, AFTER_IMPACTS, PREPARE, WARM_START, SOLVE, INTEGRATE, RELAX, FINALIZE = range(9)
+IMPACT_BEGIN, IMPACT, IMPACT_TRAVEL, AFTER_IMPACTS, PREPARE, WARM_START, SOLVE, INTEGRATE, RELAX, FINALIZE = range(10)
 SWEEPS = (IMPACT, SOLVE, RELAX)
-# the impact rounds, numbered through the stage: compression, bounce, then the sequential rounds
+# the impact rounds, numbered through the stage: compression, bounce, then the sequential rounds,
+# then the two rounds IMPACT_TRAVEL repeats
 BOUNCE_ROUND = JOINT_ROUNDS
 FIRST_SEQUENTIAL_ROUND = JOINT_ROUNDS + 1
+TRAVEL_ROUND = FIRST_SEQUENTIAL_ROUND + IMPACT_SWEEPS
+# IMPACT_TRAVEL's loop runs its two rounds at most this many times a substep (impact.py: a blow
+# still travelling after them is stopped by the soft solve, inelastically)
+TRAVEL_LOOPS = 16
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,7 @@ def substep_plan(iterations: int, relax_iterations: int, impacts: bool, joint: b
             plan.append(Stage(IMPACT, BOUNCE_ROUND, 1, MODE_IMPACT_BOUNCE))
         plan += [Stage(IMPACT, FIRST_SEQUENTIAL_ROUND + k, IMPACT_SWEEPS, MODE_IMPACT, reverse=k % 2)
                  for k in range(IMPACT_SWEEPS)]
+        plan.append(Stage(IMPACT_TRAVEL, TRAVEL_ROUND, mode=MODE_IMPACT))
         plan.append(Stage(AFTER_IMPACTS))
     plan += [Stage(PREPARE), Stage(WARM_START)]
     plan += [Stage(SOLVE, k, iterations, MODE_SOLVE, use_bias=1, reverse=k % 2) for k in range(iterations)]
@@ -80,6 +87,12 @@ def substep_plan(iterations: int, relax_iterations: int, impacts: bool, joint: b
     return tuple(plan)
 
 
+def travel_rounds() -> tuple[Stage, Stage]:
+    """The two sequential rounds IMPACT_TRAVEL repeats, in opposite directions (a round's numbers
+    follow every fixed round's, so plan.impact_first_since can tell them)."""
+    return (Stage(IMPACT, TRAVEL_ROUND, 2, MODE_IMPACT, reverse=0), Stage(IMPACT, TRAVEL_ROUND + 1, 2, MODE_IMPACT, reverse=1))
+
+
 def impact_round_sweeps(stage: Stage) -> int:
     """Sweeps an impact round runs: one for the bounce (each member bounces once), else IMPACT_INNER."""
     return 1 if stage.mode == MODE_IMPACT_BOUNCE else IMPACT_INNER
@@ -89,8 +102,10 @@ def impact_first_since(stage: Stage, previous_sweep: int) -> int:
     """The ``since`` of an impact round's first sweep (impact.unchanged_since): -1, every manifold
     taken, in the first round of each phase: the joint phase's (each closing manifold's t*:
     impact_joint.py) and the sequential one's (the manifolds the joint phase left, and a repeat for
-    the pairs found after the impacts); else ``previous_sweep``, the sweep in which the same launch
+    the pairs found after the impacts), and IMPACT_TRAVEL's first round (its loop replays the same
+    sweep numbers, so stamps of the last pass may read newer than the sweep at hand: taking every
+    manifold then is always right); else ``previous_sweep``, the sweep in which the same launch
     last took its manifolds."""
-    if stage.index in (0, FIRST_SEQUENTIAL_ROUND):
+    if stage.index in (0, FIRST_SEQUENTIAL_ROUND, TRAVEL_ROUND):
         return -1
     return previous_sweep

@@ -20,13 +20,14 @@ from ..types import INTEGRATORS, ROTATIONS
 from ..schedule.coloring import COLOR_COUNT
 from .domains import DOMAIN_SWEEP
 from .pushout import pushout_pair, pushout_terrain_impulse, pushout_terrain_position
-from .impact import IMPACT_INNER, impact_begin, pair_contact_times, terrain_impact
+from .impact import IMPACT_INNER, count_travel_loop, impact_begin, impacts_travelling, pair_contact_times, terrain_impact
 from .impact_joint import joint_phase_in_order, pair_joint_pass, terrain_joint_impact, terrain_members
 from .pair_overflow import OverflowPairs
 from .pair_solve import (MODE_IMPACT, MODE_IMPACT_BOUNCE, MODE_IMPACT_JOINT, MODE_SOLVE, MODE_WARM_START, RELAX_MODES,
                          chain_pass, PAIR_PASS)
-from .plan import (AFTER_IMPACTS, FINALIZE, FIRST_SEQUENTIAL_ROUND, IMPACT, IMPACT_BEGIN, INTEGRATE, PREPARE, RELAX,
-                   SOLVE, WARM_START, impact_first_since, impact_round_sweeps, substep_plan)
+from .plan import (AFTER_IMPACTS, FINALIZE, FIRST_SEQUENTIAL_ROUND, IMPACT, IMPACT_BEGIN, IMPACT_TRAVEL, INTEGRATE,
+                   PREPARE, RELAX, SOLVE, TRAVEL_LOOPS, WARM_START, impact_first_since, impact_round_sweeps, substep_plan,
+                   travel_rounds)
 from .soft_step import (CONVERGENCE_GRAVITY_SHARE, RELAX_PASSES, push_cap, soft_coefficients, soft_load, solve_and_integrate,
                         sweep_tolerance)
 from .solver_args import DomainSlabs, JointImpacts, SolverBodies, StepSettings
@@ -98,6 +99,9 @@ class SoftStepSolver:
         self.solver_toi_shift = wp.zeros(n, dtype=wp.vec3, device=device)
         # the impact sweep that last changed a body's velocity (impact.unchanged_since)
         self.solver_impact_stamp = wp.zeros(n, dtype=wp.int32, device=device)
+        # whether a blow is still travelling after the impact rounds, and the loop's passes (plan.IMPACT_TRAVEL)
+        self.travelling = wp.zeros(1, dtype=wp.int32, device=device)
+        self.travel_loops = wp.zeros(1, dtype=wp.int32, device=device)
         # when the earliest of a body's pairs closes within the substep (impact.pair_contact_times)
         self.solver_pair_toi = wp.zeros(n, dtype=float, device=device)
         # when and with whom each body's last impact of the substep struck (impact.pair_event_start)
@@ -311,6 +315,32 @@ class SoftStepSolver:
                    inputs=[a.model, a.settings, a.slots, a.solver, sweep, since], device=self.device)
             pairs(stage.mode, sweep, since)
 
+    def _impacts_while_travelling(self, m, run_round, sweeps_of_round):
+        """plan.IMPACT_TRAVEL: while the round before changed a body, plan.travel_rounds() again, at
+        most TRAVEL_LOOPS times (impact.py).  ``run_round(stage)`` runs one round on the schedule
+        at hand; ``sweeps_of_round(index)`` gives the first and last sweep numbers it stamps.
+        The flag stays on the device (``wp.capture_while``); the check is one launch, never split
+        (its atomics: launch.py)."""
+
+        def check(index: int):
+            first, last = sweeps_of_round(index)
+            wp.launch(impacts_travelling, dim=m.body_count, device=self.device, **gpu_blocks(self.device),
+                      inputs=[0, first, last, self.solver_impact_stamp, self.travelling])
+
+        def loop():
+            rounds = travel_rounds()
+            for stage in rounds:
+                run_round(stage)
+            self.travelling.zero_()
+            check(rounds[-1].index)
+            wp.launch(count_travel_loop, dim=1, device=self.device,
+                      inputs=[TRAVEL_LOOPS, self.travel_loops, self.travelling])
+
+        self.travelling.zero_()
+        self.travel_loops.zero_()
+        check(travel_rounds()[0].index - 1)
+        wp.capture_while(self.travelling, loop)
+
     def _joint_sweep(self, m, a, color_sizes, mode: int, sweep: int, since: int):
         """One sweep of the joint phase or its bounce on the colour schedule (impact_joint.py): the
         bodies' terrain members, then the member pairs colour by colour; the overflow pairs take
@@ -369,10 +399,18 @@ class SoftStepSolver:
 
         plan = substep_plan(s.iterations, s.relax_iterations, self.runs_impacts(m), self.joint_impacts)
 
+        def impact_round(stage):
+            self._impact_sweep(m, a, pairs, color_sizes, stage)
+
+        def colour_sweeps(index: int):  # the sweep numbers of one round (_impact_sweep)
+            return index * IMPACT_INNER, index * IMPACT_INNER + IMPACT_INNER - 1
+
         def sequential_impact_sweeps():
             for stage in plan:
                 if stage.kind == IMPACT and stage.mode == MODE_IMPACT:
-                    self._impact_sweep(m, a, pairs, color_sizes, stage)
+                    impact_round(stage)
+                elif stage.kind == IMPACT_TRAVEL:
+                    self._impacts_while_travelling(m, impact_round, colour_sweeps)
 
         def impacts_again(sizes):
             nonlocal color_sizes
@@ -389,6 +427,8 @@ class SoftStepSolver:
                     self._impact_members(m, a)
             elif kind == IMPACT:
                 self._impact_sweep(m, a, pairs, color_sizes, stage)
+            elif kind == IMPACT_TRAVEL:
+                self._impacts_while_travelling(m, impact_round, colour_sweeps)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     color_sizes = after_impacts(impacts_again)
@@ -459,11 +499,19 @@ class SoftStepSolver:
         fused_with_solve = s.iterations > 0
         fused_with_relax = s.relax_iterations > 0
 
+        def impact_round(stage):
+            sweep(stage.mode, stage.reverse, impact=stage)
+
+        def slab_sweeps(index: int):  # the sweep numbers of one round, slabs then boundary (domains.impact_sweep_number)
+            return 2 * index * IMPACT_INNER, (2 * index + 2) * IMPACT_INNER - 1
+
         def impacts_again(_sizes):  # g's arrays and counts were updated in place by the pass
             self._pair_contact_times(a)
             for again in plan:
                 if again.kind == IMPACT and again.mode == MODE_IMPACT:
-                    sweep(again.mode, again.reverse, impact=again)
+                    impact_round(again)
+                elif again.kind == IMPACT_TRAVEL:
+                    self._impacts_while_travelling(m, impact_round, slab_sweeps)
 
         for stage in plan:
             kind = stage.kind
@@ -478,7 +526,9 @@ class SoftStepSolver:
                                                      a.pairs, a.solver, a.joint], dev,
                            key=self._site(state_in, "joint"), min_chunk=1)
             elif kind == IMPACT:
-                sweep(stage.mode, stage.reverse, impact=stage)
+                impact_round(stage)
+            elif kind == IMPACT_TRAVEL:
+                self._impacts_while_travelling(m, impact_round, slab_sweeps)
             elif kind == AFTER_IMPACTS:
                 if after_impacts is not None:
                     after_impacts(impacts_again)

@@ -38,8 +38,9 @@ from ..kernel_args import BadSteps, BodyModel, BodyState, TerrainContacts
 from ..integrate import free_drift, integrate_rotation, pre_kick_fraction, same_vector, world_inertia, world_inv_inertia
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import solve_terrain_row
-from .soft_step import (BodyVelocity, apply_contact_impulse, apply_impulse, drift_rotation, solve_rolling,
-                        solve_sweeps, sweep_converged, warm_start_terrain)
+from .impact_point import engage_speed
+from .soft_step import (BodyVelocity, apply_contact_impulse, apply_impulse, drift_rotation, row_meets_an_impact,
+                        solve_rolling, solve_sweeps, sweep_converged, warm_start_terrain)
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -235,6 +236,15 @@ def sweep_body_terrain(
         for k in range(count):
             if slots.terrain_contact_normal_impulse[solver.terrain_row_slot[start + k]] > 0.0:
                 holding = 1
+        engage = engage_speed(settings.gravity, settings.h)
+        for k in range(count):
+            slot = solver.terrain_row_slot[start + k]
+            arm = slots.terrain_contact_point[slot] - x_ref
+            n = slots.terrain_contact_normal[slot]
+            separation = -slots.terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
+            carried = slots.terrain_contact_normal_impulse[slot]
+            if holding != 0 and row_meets_an_impact(arm, n, separation, carried, v, w, settings.h, engage):
+                holding = 0
         passes = solve_sweeps(1, settings.relax_passes, count, holding)
     reach = wp.length(model.body_size[i])
     inv_inertia = solver.solver_inv_inertia[i]
