@@ -239,6 +239,31 @@ def test_rolling_resistance_on_a_box_floor_matches_the_plane(rolling_resistance,
         assert a == pytest.approx(expected, rel=0.02)
 
 
+@pytest.mark.parametrize("path", ["terrain only", "body contact on"])
+@pytest.mark.parametrize("rolling_resistance, under_deg, radius", [
+    (0.1, 1.0, 0.25), (0.1, 3.0, 0.1), (0.3, 5.0, 0.25), (0.05, 0.5, 0.5), (0.2, 1.0, 0.1)])
+def test_rolling_resistance_holds_a_ball_on_a_gentler_slope(path, rolling_resistance, under_deg, radius, device):
+    """A ball set on a plane tilted under atan(c_r) (mu 0.8, sleeping off) stays where it is:
+    friction m g sin(theta) at the contact and its torque r m g sin(theta) are within mu N and
+    c_r r N.  Taken as two rows in turn the friction and the resistance undid each other, and the
+    ball crept down at about 0.6 g sin(theta) h for ever (2.7 mm/s for c_r 0.1 at 1 degree under;
+    soft_step.hold_ball).  Bound over 5 s: the contact spring's sag along the slope,
+    g / omega^2 at omega = 2 pi 60 Hz (0.07 mm), twice."""
+    theta = math.atan(rolling_resistance) - math.radians(under_deg)
+    normal = np.array([math.sin(theta), math.cos(theta), 0.0])
+    down = np.array([math.cos(theta), -math.sin(theta), 0.0])
+    b = ModelBuilder(Material(friction=0.8, rolling_resistance=rolling_resistance))
+    b.set_terrain(PlaneTerrain(normal=tuple(normal)))
+    b.add_sphere(radius, 1.0, position=tuple(normal * radius))
+    if path == "body contact on":
+        b.add_sphere(0.1, 1.0, position=(30.0, 40.0, 0.0))  # far above: the staged solver runs
+    sim = simulator(b, device, sleep=False)
+    start = sim.state.body_pos.numpy()[0].astype(np.float64)
+    sim.step(300)
+    moved = float(np.dot(sim.state.body_pos.numpy()[0] - start, down))
+    assert abs(moved) < 2.0 * G / (2.0 * math.pi * 60.0) ** 2
+
+
 @pytest.mark.parametrize("gravity, dt", [(100.0, 1 / 30), (40.0, 1 / 20)])
 def test_body_floor_window_covers_gravity_like_the_terrain(gravity, dt, device):
     """A sphere falling on a static box sinks no deeper than on the terrain plane: the pair's swept
