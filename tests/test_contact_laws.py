@@ -247,7 +247,7 @@ def test_rolling_resistance_holds_a_ball_on_a_gentler_slope(path, rolling_resist
     friction m g sin(theta) at the contact and its torque r m g sin(theta) are within mu N and
     c_r r N.  Taken as two rows in turn the friction and the resistance undid each other, and the
     ball crept down at about 0.6 g sin(theta) h for ever (2.7 mm/s for c_r 0.1 at 1 degree under;
-    soft_step.hold_ball).  Bound over 5 s: the contact spring's sag along the slope,
+    rolling.hold_ball).  Bound over 5 s: the contact spring's sag along the slope,
     g / omega^2 at omega = 2 pi 60 Hz (0.07 mm), twice."""
     theta = math.atan(rolling_resistance) - math.radians(under_deg)
     normal = np.array([math.sin(theta), math.cos(theta), 0.0])

@@ -248,3 +248,27 @@ def test_a_plate_pivoting_on_its_edge_does_not_slap_into_the_terrain(plate, subs
         rot = sim.state.body_rot.numpy()[0].astype(np.float64)
         deepest = max(deepest, oracle_depth(terrain, centre, rot, (0.3, 0.02, 0.3)))
     assert deepest < 3e-3
+
+
+@pytest.mark.parametrize("drop", [0.0, 0.1, 0.133, 0.2, 0.233])
+def test_a_plate_struck_by_another_does_not_slap_into_the_terrain(drop, device):
+    """A plate (half 0.3 x 0.02 x 0.3) lands on the default terrain and a second falls onto it, 0.9 m
+    (+ ``drop``) above, at 30 substeps (what the plan gives a rain of such plates).  The struck
+    plate had no energy of its own at the step's pass, so its far slots stayed shut while the blow
+    pivoted it, and it went up to 31 mm in; its slots now open for both bodies' energies
+    (collide/struck_reach.py).  Bound as above: 3 mm by the float64 oracle, for both plates."""
+    terrain = cases.DEFAULT_TERRAIN
+    half = (0.3, 0.02, 0.3)
+    b = ModelBuilder(Material(restitution=0.1, friction=0.5))
+    b.set_terrain(terrain)
+    b.add_box(half, 1.0, position=(-1.431103, 0.549059, 0.402697), orientation=(-0.269954, 0.351316, 0.889757, -0.109701))
+    b.add_box(half, 1.0, position=(-1.612634, 1.449059 + drop, 0.436499),
+              orientation=(-0.356484, -0.645694, -0.653968, 0.168299))
+    sim = Simulator(b.finalize(device), SimConfig(substeps=30, device=device))
+    deepest = 0.0
+    for _ in range(60):
+        sim.step()
+        pos = sim.state.body_pos.numpy().astype(np.float64)
+        rot = sim.state.body_rot.numpy().astype(np.float64)
+        deepest = max(deepest, *(oracle_depth(terrain, pos[k], rot[k], half) for k in range(2)))
+    assert deepest < 3e-3

@@ -8,15 +8,14 @@ and ``substep_plan`` say what runs and why).  With ``contact_update = "substep"`
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
 
-With ``"step"`` (the default, Box2D v3's soft step) the collision stages run once, at the
-start of the step, with speculative margins widened to cover the whole step; the substeps then
+With ``"step"`` (the default, Box2D v3's soft step) the collision stages run once, at the start
+of the step, with speculative margins widened to cover the whole step (and, after the pairs,
+the terrain slots of boxes a partner could strike: collide/struck_reach.py); the substeps then
 solve those contacts with gaps updated from the bodies' motion (solvers/staged.py).  That
 applies to scenes with body-body contact; the fused terrain-only kernel re-collides every
-substep either way (its collision pass is a few terrain evaluations per body).  Then, with
-sleeping on, the sleep timers are updated (sleep.py).
-
-The terrain kernel runs only when the scene has a terrain and the pair pipeline only when it
-has body-body contact (``body_contact``), so a scene pays for what it uses.
+substep either way.  Then, with sleeping on, the sleep timers are updated (sleep.py).  The
+terrain kernel runs only when the scene has a terrain and the pair pipeline only when it has
+body-body contact (``body_contact``), so a scene pays for what it uses.
 ``graph`` (default: on CUDA) captures the whole step, terrain, pairs, colours, substeps,
 restitution and sleeping, as one graph and replays it (on the CPU with Warp's CPU capture, which
 tests use to prove the CUDA contract).  Nothing inside a captured step is read back: launches
@@ -46,6 +45,7 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_terrain
+from .collide.struck_reach import StruckReach
 from .collide.narrow_phase import reach_outrun
 from .collide.pair_pipeline import MovedBodies, PairContactPipeline, default_pair_capacity
 from .sleep import AwakeModel, Sleep
@@ -162,6 +162,7 @@ class Simulator:
         self._probe = None
         self.pair_overflow = wp.zeros(1, dtype=wp.int64, device=self.device)
         self.outrun = wp.zeros(1, dtype=wp.int32, device=self.device)
+        self.struck = StruckReach(model.body_count, self.device)  # collide/struck_reach.py
         self.outrun_passes = wp.zeros(1, dtype=wp.int32, device=self.device)  # mid-step passes run, ever
         self._saved = None  # the state at the start of a step() call, when its steps are captured
         self._warm = False
@@ -198,9 +199,11 @@ class Simulator:
         share = 1.0 - PRE_KICK_FRACTION[self.config.integrator]
         return tuple(float(share * self.substep_dt * g) for g in self.config.gravity)
 
-    def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False):
+    def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False,
+                struck_only: bool = False):
         """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between
-        a step's collision passes and stored relative to the pass's pose (collide_terrain)."""
+        a step's collision passes and stored relative to the pass's pose; ``struck_only``: only the
+        boxes whose reach a partner widened (collide_terrain, collide/struck_reach.py)."""
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
@@ -213,9 +216,9 @@ class Simulator:
                 bind(BodyModel, m, m), bind(TerrainModel, m, m),
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-                int(refresh_spheres), int(self.config.face_search), int(self.closest_jet),
-                # State in
-                bind(BodyState, state, state), self.solver.solver_ref_pos,
+                int(refresh_spheres), int(struck_only), int(self.config.face_search), int(self.closest_jet),
+                # State in, Solver in, In
+                bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
                 # Contacts
                 bind(TerrainContacts, contacts, contacts),
             ],
@@ -227,8 +230,7 @@ class Simulator:
         if not self.profile:
             return fn(*args)
         wp.synchronize_device(self.device)
-        start = time.perf_counter()
-        out = fn(*args)
+        start, out = time.perf_counter(), fn(*args)
         wp.synchronize_device(self.device)
         self.stage_times[name] = self.stage_times.get(name, 0.0) + time.perf_counter() - start
         return out
@@ -292,8 +294,8 @@ class Simulator:
         step's reference pose, so the manifolds found then and now share one pose and the
         substeps' anchors stay valid; the impulses so far are kept as its warm start.  The flag
         is read on the device (wp.capture_if): a captured step records the pass as a conditional
-        node.  Terrain contacts are not found again (spheres' are, every substep; a box struck
-        into the terrain mid-step is caught by the terrain slots' own speculative window).
+        node.  Terrain contacts are not found again (spheres' are, every substep; a box a partner
+        could strike opened its slots for that blow at the pass: collide/struck_reach.py).
         ``impacts_again``: the solver's impact sweeps, rerun after a pass made between the impact
         stage and the solve, so that the contacts it found bounce in this substep."""
         m = self.physics_model
@@ -321,9 +323,8 @@ class Simulator:
         return self._color_sizes
 
     def _refreshes_spheres(self) -> bool:
-        """Spheres' terrain contacts are found every substep (collide_terrain): a sphere has one
-        slot, found by a closest-point search warm-started from the last one, so it costs a few
-        terrain evaluations per sphere and substep."""
+        """Spheres' terrain contacts are found every substep (collide_terrain): a closest-point
+        search warm-started from the last one, a few terrain evaluations per sphere and substep."""
         m = self.model
         return (self.refresh_sphere_contacts and m.terrain_kind != TERRAIN_NONE and m.checkpoint_count > 0
                 and bool(np.any(m.host["body_shape"] == SHAPE_SPHERE)))
@@ -336,6 +337,9 @@ class Simulator:
             self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin)
             if self.pairs is not None:
                 self._stage("pairs", self._collide_pairs, margin, sweep_time)
+                m, state = self.physics_model, self.states[0]
+                self._stage("terrain", self.struck.widen, bind(BodyModel, m, m), state, self.contacts, margin,
+                            h, lambda: self.collide(state, self.contacts, h, margin, struck_only=True))
 
         collide()
         if self.sleep is not None and self.pairs is not None:
@@ -551,12 +555,10 @@ class Simulator:
         return self.sleep.awake_count()
 
     def update_settings(self, **changes):
-        """Change SimConfig fields (dt, substeps, gravity, integrator, ...) between steps.
-
-        Unknown names raise ValueError naming the field, and so do the settings the Simulator is
-        built around (BUILD_SETTINGS: the device, the pair buffers and pipeline, sleeping, graph
-        capture), which a change here would store and never apply.
-        """
+        """Change SimConfig fields (dt, substeps, gravity, integrator, ...) between steps.  Unknown
+        names raise ValueError naming the field, and so do the settings the Simulator is built
+        around (BUILD_SETTINGS: the device, the pair buffers and pipeline, sleeping, graph capture),
+        which a change here would store and never apply."""
         for key in changes:
             if key not in SIM_SCHEMA:
                 raise ValueError(f"unknown simulation setting {key!r}")

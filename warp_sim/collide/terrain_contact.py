@@ -65,7 +65,7 @@ Speculative margin: a slot is active while depth > -(margin + h |v_n| + h^2 |g|)
 point can close in one substep (h the whole step when contacts are found once per step); the
 solver then lets it close exactly that gap (v_n >= -gap/h), so a fast body stops on the surface
 instead of passing through it.  For a box, |v_n| is at least the fastest any of its points could
-move after contact events that add no energy (reachable_speed): its slots stay open for the
+move after contact events that add no energy (struck_reach.py): its slots stay open for the
 whole step, and a pivot on one edge mid-step swings the far edge at up to about twice the fall.
 """
 
@@ -79,6 +79,7 @@ from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSam
 from ..types import SHAPE_SPHERE
 from .closest_jet import jet_step
 from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
+from .struck_reach import reachable_speed
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
 wp.set_module_options({"enable_backward": False})
@@ -313,22 +314,6 @@ def box_rise_bound(center: HeightSample, dx: float, dz: float, cubic_bound: floa
 REFRESH_MIN_TRAVEL = wp.constant(1.0e-3)
 
 
-@wp.func
-def reachable_speed(v: wp.vec3, omega: wp.vec3, rot: wp.mat33, inertia: wp.vec3, inv_mass: float,
-                    half: wp.vec3) -> float:
-    """The fastest any point of a box can move after contact events that add no kinetic energy:
-    the most |v'| + |w'| R over m |v'|^2 / 2 + w' . I w' / 2 <= KE is sqrt(2 KE (1/m + R^2 / I_min))
-    (R the box's bounding radius, I_min its least principal moment).  A plate landing on one edge
-    pivots on it, and its far edge, barely moving at the pass, swings down at up to twice the
-    plate's fall: the window a slot opens with must cover that, not the slot's approach at the
-    pass (a plate found once per 1/60 s step with 36 substeps went 24 mm into the terrain)."""
-    w = wp.transpose(rot) * omega
-    twice_ke_per_mass = wp.dot(v, v) + inv_mass * (inertia[0] * w[0] * w[0] + inertia[1] * w[1] * w[1]
-                                                   + inertia[2] * w[2] * w[2])
-    least = wp.min(inertia[0], wp.min(inertia[1], inertia[2]))
-    return wp.sqrt(twice_ke_per_mass * (1.0 + wp.dot(half, half) / (inv_mass * least)))
-
-
 @wp.kernel
 def collide_terrain(
     tid_offset: int,
@@ -341,12 +326,15 @@ def collide_terrain(
     speculative_margin: float,
     cull: int,
     refresh_spheres: int,
+    struck_only: int,
     face_search: int,
     jet_search: int,
     # State in
     state_in: BodyState,
     # Solver in (the pose of the step's pass)
     reference_pos: wp.array(dtype=wp.vec3),
+    # In
+    body_struck_reach: wp.array(dtype=float),
     # Contacts in/out
     contacts: TerrainContacts,
 ):
@@ -359,7 +347,10 @@ def collide_terrain(
     depth + n . (x - x_ref), so that its gap -depth + n . (x - x_ref) and arm p - x_ref are those of
     now.  A sphere's tangent-plane gap is otherwise off by k d^2 / 2 after sliding d over ground of
     curvature k, which made a ball rolling in a valley gain 16 % of its energy in 20 s.  Boxes are
-    left as they are (their slots and count)."""
+    left as they are (their slots and count).
+
+    ``struck_only``: after the pairs of a pass, only the boxes whose reach a partner widened
+    (struck_reach.py, ``body_struck_reach``), their slots found again at the same pose with it."""
     body = wp.tid() + tid_offset
     if refresh_spheres != 0:
         # only spheres touching the terrain since the step's pass, and only once they have moved:
@@ -403,9 +394,14 @@ def collide_terrain(
         # the support face's checkpoints climb to the crests within their cells (face_search.py)
         face = support_face(rot, -fourier_normal(center.grad))
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
-    reach_speed = float(0.0)  # a box's points: the fastest a contact event could make them (reachable_speed)
+    reach_speed = float(0.0)  # a box's points: the fastest a contact event could make them (struck_reach.py)
     if dynamic and not is_sphere:
-        reach_speed = reachable_speed(v, omega, rot, model.body_inertia[body], model.body_inv_mass[body], half)
+        reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
+                                      model.body_inv_inertia[body], model.body_inv_mass[body], half)
+    if struck_only != 0:
+        if not dynamic or is_sphere or body_struck_reach[body] <= reach_speed:
+            return
+        reach_speed = body_struck_reach[body]
 
     active = int(0)
     for slot in range(start, start + count):

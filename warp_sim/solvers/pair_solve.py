@@ -141,7 +141,7 @@ def solve_pair_points(
     vel = vel_in
     friction = wp.sqrt(model.body_friction[i] * model.body_friction[j])
     count = pairs.pair_point_count[p]
-    # rolling resistance of a sphere in the pair (terrain contacts: soft_step.solve_rolling); a
+    # rolling resistance of a sphere in the pair (terrain contacts: rolling.solve_rolling); a
     # sphere's pair has one point, so the pair's second slot keeps its accumulated angular impulse
     rolling_arm = wp.max(model.body_rolling_arm[i], model.body_rolling_arm[j])
     if mode == MODE_WARM_START:

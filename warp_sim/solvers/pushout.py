@@ -20,7 +20,7 @@ import warp as wp
 
 from ..schedule.coloring import color_range
 from .pair_solve import PairVelocity, apply_pair_impulse, normal_mass_inverse, relative_velocity
-from .soft_step import BodyVelocity, apply_impulse
+from .body_velocity import BodyVelocity, apply_impulse
 
 wp.set_module_options({"enable_backward": False})
 

@@ -39,8 +39,9 @@ from ..integrate import free_drift, integrate_rotation, pre_kick_fraction, same_
 from ..types import ROTATION_MATRIX, SHAPE_SPHERE
 from .contact_rows import solve_terrain_row
 from .impact_point import engage_speed
-from .soft_step import (BodyVelocity, apply_contact_impulse, apply_impulse, drift_rotation, hold_ball, isotropic_inverse,
-                        row_meets_an_impact, solve_rolling, solve_sweeps, sweep_converged, warm_start_terrain)
+from .body_velocity import BodyVelocity, apply_contact_impulse, apply_impulse
+from .rolling import hold_ball, isotropic_inverse, solve_rolling
+from .soft_step import drift_rotation, row_meets_an_impact, solve_sweeps, sweep_converged, warm_start_terrain
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -270,7 +271,7 @@ def sweep_body_terrain(
                 vel.v = v
                 vel.w = w
                 vel.rolling_impulse = rolling_impulse
-                # held still at once where friction and rolling resistance can (soft_step.hold_ball)
+                # held still at once where friction and rolling resistance can (rolling.hold_ball)
                 hold = hold_ball(vel, n, arm, inv_mass, isotropic_inverse(inv_inertia), friction, rolling,
                                  slots.terrain_contact_normal_impulse[slot], slots.terrain_contact_tangent_impulse[slot])
                 vel = hold.vel
