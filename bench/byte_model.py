@@ -44,7 +44,7 @@ from warp_sim.schedule.coloring import COLOR_COUNT  # noqa: E402
 
 
 PAIR_KERNELS = {"collide_pairs", "carry_pair_impulses", "store_pairs", "color_init", "color_pick", "color_keys",
-                "color_bounds", "pair_pass", "pushout_pair", "gather_neighbour_timers"}
+                "color_bounds", "pair_pass", "pushout_pair", "gather_neighbour_timers", "struck_reach"}
 
 
 # the split sweeps of the pairs past the colours (solvers/pair_overflow.py): live = that set's size
@@ -52,7 +52,7 @@ OVERFLOW_KERNELS = {"overflow_count", "overflow_impact_pass", "overflow_pair_pas
 
 # per-body or per-pair kernels launched with wp.launch directly (atomics: never split)
 DIRECT_KERNELS = {"reach_outrun", "mark_touched_sleepers", "gather_neighbour_timers", "overflow_count",
-                  "overflow_impact_pass", "overflow_pair_pass"}
+                  "overflow_impact_pass", "overflow_pair_pass", "struck_reach", "impacts_travelling"}
 
 
 def _function_sources() -> dict[str, str]:
