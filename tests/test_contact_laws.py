@@ -239,7 +239,24 @@ def test_rolling_resistance_on_a_box_floor_matches_the_plane(rolling_resistance,
         assert a == pytest.approx(expected, rel=0.02)
 
 
-@pytest.mark.parametrize("path", ["terrain only", "body contact on"])
+def tilted_floor(builder, path, theta, radius):
+    """A floor through the origin tilted theta about z (the terrain plane, or a static box whose
+    top face is that plane: the pair's rows, rolling.hold_ball_on_static), a ball of ``radius``
+    resting on it at the origin; returns the ball's index and the floor's downhill direction."""
+    normal = np.array([math.sin(theta), math.cos(theta), 0.0])
+    if path == "static box floor":
+        half = 0.5
+        builder.add_box((6.0, half, 6.0), 1.0, position=tuple(-normal * half),
+                        orientation=(0.0, 0.0, math.sin(-theta / 2), math.cos(-theta / 2)), static=True)
+    else:
+        builder.set_terrain(PlaneTerrain(normal=tuple(normal)))
+    ball = builder.add_sphere(radius, 1.0, position=tuple(normal * radius))
+    if path == "body contact on":
+        builder.add_sphere(0.1, 1.0, position=(30.0, 40.0, 0.0))  # far above: the staged solver runs
+    return ball, np.array([math.cos(theta), -math.sin(theta), 0.0])
+
+
+@pytest.mark.parametrize("path", ["terrain only", "body contact on", "static box floor"])
 @pytest.mark.parametrize("rolling_resistance, under_deg, radius", [
     (0.1, 1.0, 0.25), (0.1, 3.0, 0.1), (0.3, 5.0, 0.25), (0.05, 0.5, 0.5), (0.2, 1.0, 0.1)])
 def test_rolling_resistance_holds_a_ball_on_a_gentler_slope(path, rolling_resistance, under_deg, radius, device):
@@ -249,19 +266,33 @@ def test_rolling_resistance_holds_a_ball_on_a_gentler_slope(path, rolling_resist
     ball crept down at about 0.6 g sin(theta) h for ever (2.7 mm/s for c_r 0.1 at 1 degree under;
     rolling.hold_ball).  Bound over 5 s: the contact spring's sag along the slope,
     g / omega^2 at omega = 2 pi 60 Hz (0.07 mm), twice."""
-    theta = math.atan(rolling_resistance) - math.radians(under_deg)
-    normal = np.array([math.sin(theta), math.cos(theta), 0.0])
-    down = np.array([math.cos(theta), -math.sin(theta), 0.0])
     b = ModelBuilder(Material(friction=0.8, rolling_resistance=rolling_resistance))
-    b.set_terrain(PlaneTerrain(normal=tuple(normal)))
-    b.add_sphere(radius, 1.0, position=tuple(normal * radius))
-    if path == "body contact on":
-        b.add_sphere(0.1, 1.0, position=(30.0, 40.0, 0.0))  # far above: the staged solver runs
+    ball, down = tilted_floor(b, path, math.atan(rolling_resistance) - math.radians(under_deg), radius)
     sim = simulator(b, device, sleep=False)
-    start = sim.state.body_pos.numpy()[0].astype(np.float64)
+    start = sim.state.body_pos.numpy()[ball].astype(np.float64)
     sim.step(300)
-    moved = float(np.dot(sim.state.body_pos.numpy()[0] - start, down))
+    moved = float(np.dot(sim.state.body_pos.numpy()[ball] - start, down))
     assert abs(moved) < 2.0 * G / (2.0 * math.pi * 60.0) ** 2
+
+
+@pytest.mark.parametrize("path", ["terrain only", "static box floor"])
+@pytest.mark.parametrize("rolling_resistance, over_deg, radius", [(0.1, 2.0, 0.25), (0.2, 4.0, 0.1), (0.05, 3.0, 0.5)])
+def test_rolling_resistance_lets_a_ball_roll_down_a_steeper_slope(path, rolling_resistance, over_deg, radius, device):
+    """The hold must not hold what cannot be held: past atan(c_r) (friction mu 0.8 still grips) a
+    ball rolls down at (5/7) g (sin(theta) - c_r cos(theta)) (the resistance's torque c_r r N
+    against the roll, the ball's I = 2/5 m r^2).  Measured as the velocity gained between 0.5 s
+    and 1.5 s (the first half second lets the contact settle); semi-implicit Euler gains exactly
+    a h per substep at a constant force, so 2 % covers the contact spring's ripple."""
+    theta = math.atan(rolling_resistance) + math.radians(over_deg)
+    b = ModelBuilder(Material(friction=0.8, rolling_resistance=rolling_resistance))
+    ball, down = tilted_floor(b, path, theta, radius)
+    sim = simulator(b, device, sleep=False)
+    sim.step(30)
+    v0 = float(np.dot(sim.state.body_vel.numpy()[ball], down))
+    sim.step(60)
+    gained = float(np.dot(sim.state.body_vel.numpy()[ball], down)) - v0
+    expected = 5.0 / 7.0 * G * (math.sin(theta) - rolling_resistance * math.cos(theta))
+    assert gained == pytest.approx(expected, rel=0.02)
 
 
 @pytest.mark.parametrize("gravity, dt", [(100.0, 1 / 30), (40.0, 1 / 20)])

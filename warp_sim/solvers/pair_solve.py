@@ -16,6 +16,7 @@ from .impact_joint import IMPACT_BOUNCE, IMPACT_JOINT, IMPACT_SEQUENTIAL
 from .impact_point import engage_speed, spheres_miss
 from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
 from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
+from .rolling import hold_ball_on_static, static_ball_side
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
 
@@ -144,6 +145,12 @@ def solve_pair_points(
     # rolling resistance of a sphere in the pair (terrain contacts: rolling.solve_rolling); a
     # sphere's pair has one point, so the pair's second slot keeps its accumulated angular impulse
     rolling_arm = wp.max(model.body_rolling_arm[i], model.body_rolling_arm[j])
+    # a ball on a static body is held still at once where it can be (rolling.hold_ball_on_static)
+    ball_side = int(0)
+    if count == 1:
+        ball_side = static_ball_side(model.body_rolling_arm[i], model.body_rolling_arm[j], model.body_inv_mass[i],
+                                     model.body_inv_mass[j])
+    held = int(0)
     if mode == MODE_WARM_START:
         reset_rolling(p, pairs)
 
@@ -284,6 +291,13 @@ def solve_pair_points(
                 pairs.pair_tangent_impulse[slot] = new_t
                 vel = apply_pair_impulse(vel, new_t - old_t, ri_t, rj_t, inv_mi, inv_mj, inv_ii, inv_ij)
                 normal_total = normal_total + new_acc
+                if ball_side != 0:
+                    hold = hold_ball_on_static(vel, ball_side, n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij, friction,
+                                               rolling_arm, new_acc, new_t, pairs.pair_tangent_impulse[p * POINTS + 1])
+                    vel = hold.vel
+                    held = hold.held
+                    pairs.pair_tangent_impulse[slot] = hold.tangent_impulse
+                    pairs.pair_tangent_impulse[p * POINTS + 1] = hold.rolling_impulse
         change = pair_change(before, vel, reach_i, reach_j)
         if change < settings.convergence_tolerance:
             break
@@ -298,7 +312,7 @@ def solve_pair_points(
             if blow == 0:
                 break
 
-    if rolling_arm > 0.0 and count == 1 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
+    if rolling_arm > 0.0 and count == 1 and held == 0 and (mode == MODE_SOLVE or mode == MODE_RELAX or mode == MODE_RELAX_CLOSED):
         # against the relative spin, with the mass of its axis, clamped to c_r r J_n
         acc_roll = pairs.pair_tangent_impulse[p * POINTS + 1]
         spin = vel.wi - vel.wj
