@@ -253,7 +253,9 @@ def _wait_for_chunks(out: Path, proc, count: int = 1):
     import time
 
     deadline = time.monotonic() + 120
-    while len(list(chunk_dir(out).glob("chunk_*.npz"))) < count:
+    # whole chunks only: a chunk being written is "chunk_*.npz.tmp.npz" until it is renamed, and
+    # a kill while only that existed left nothing to read
+    while len([p for p in chunk_dir(out).glob("chunk_*.npz") if not p.name.endswith(".tmp.npz")]) < count:
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, "no chunk was written"
         time.sleep(0.05)
