@@ -241,3 +241,63 @@ def test_a_settings_change_keeps_the_shares_of_gravity_the_contacts_held(device)
     assert before[0] > 0.99 and before[1] == 0.0
     sim.update_settings(iterations=sim.config.iterations)
     np.testing.assert_array_equal(sim.solver.solver_support.numpy(), before)
+
+
+def spinning_box_flybys(seed: int, count: int, spin: float, device):
+    """``count`` ball-box pairs far apart in zero gravity, e = 1 and mu 0: a ball (r 0.1-0.3 m,
+    1 kg) thrown at 2-6 m/s at a box (half extents 0.05-0.25 m, 0.1-1 kg) of random orientation
+    tumbling at up to ``spin`` rad/s about each axis and drifting back at 0.3 of that speed, aimed
+    within 0.2 m of its centre: some meet, many brush past a turning corner or face."""
+    from warp_sim.builder import random_quaternions
+    rng = np.random.default_rng(seed)
+    b = ModelBuilder(Material(friction=0.0, restitution=1.0))
+    b.set_terrain(NoTerrain())
+    side = int(math.ceil(math.sqrt(count)))
+    quats = random_quaternions(rng, count)
+    pairs = []
+    for k in range(count):
+        centre = np.array([(k % side) * 20.0, 0.0, (k // side) * 20.0])
+        radius = rng.uniform(0.1, 0.3)
+        half = rng.uniform(0.05, 0.25, 3)
+        box_mass = rng.uniform(0.1, 1.0)
+        speed = rng.uniform(2.0, 6.0)
+        aim = rng.uniform(-0.2, 0.2, 3)
+        ball = b.add_sphere(radius, 1.0, position=tuple(centre + (-1.0, 0.0, 0.0) + aim), velocity=(speed, 0.0, 0.0),
+                            angular_velocity=tuple(rng.uniform(-5.0, 5.0, 3)))
+        box = b.add_box(tuple(half), box_mass, position=tuple(centre + (0.5, 0.0, 0.0)), orientation=tuple(quats[k]),
+                        velocity=(-0.3 * speed, 0.0, 0.0), angular_velocity=tuple(rng.uniform(-spin, spin, 3)))
+        pairs.append((ball, box))
+    sim = Simulator(b.finalize(device), SimConfig(device=device, gravity=(0.0, 0.0, 0.0), sleep=False))
+    return sim, np.array(pairs)
+
+
+GRAZED_BY_A_FAST_TURN = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, found and not fixed): a box turning at 30 to 70 rad/s that grazes the ball (in "
+    "free flight 0.05 to 1.6 mm deep for under a substep) is met on its linearised path and the pair loses "
+    "1 to 8 % of its energy"))
+
+
+@pytest.mark.parametrize("seed, spin", [
+    pytest.param(seed, spin, marks=[GRAZED_BY_A_FAST_TURN] if (seed, spin) in {(5, 12.0), (5, 20.0), (6, 20.0),
+                                                                                (8, 20.0), (9, 20.0)} else [])
+    for seed in range(1, 11) for spin in (12.0, 20.0)])
+def test_balls_passing_spinning_boxes_keep_their_energy(seed, spin, device):
+    """With e = 1 and no friction every pair keeps its kinetic energy, whether the ball strikes
+    the tumbling box or passes it.  The rows saw a box's point closing on its straight path
+    v + w x r while the turning box swung it away (a corner past the ball, a face tilting off), and
+    stopped pairs that in free flight pass millimetres apart, an inelastic stop where nothing
+    touched (pair_geometry.sphere_box_passes_clear).  Of these 2,400 pairs 32 failed, in 14 of the
+    20 scenes, losing up to 20 %; 7 fail now, all true grazes (the strict expected failures).
+    Tolerance per pair: 1e-3 for float32 free flight over 1.5 s plus (|w| h)^2, the error of
+    taking a contact of a box turning by |w| h within a substep as straight motion (second order
+    in the turn; h = 1/240 s)."""
+    sim, pairs = spinning_box_flybys(seed, 120, spin, device)
+    before = sim.kinetic_energy(per_body=True).astype(np.float64)
+    turn = np.linalg.norm(sim.angular_velocity()[pairs[:, 1]], axis=1) * sim.config.dt / sim.config.substeps
+    sim.step(90)
+    after = sim.kinetic_energy(per_body=True).astype(np.float64)
+    start = before[pairs[:, 0]] + before[pairs[:, 1]]
+    change = (after[pairs[:, 0]] + after[pairs[:, 1]] - start) / start
+    allowed = 1e-3 + turn ** 2
+    bad = np.flatnonzero(np.abs(change) > allowed)
+    assert bad.size == 0, [(int(k), round(float(change[k]), 4), round(float(allowed[k]), 4)) for k in bad]

@@ -11,7 +11,7 @@ from ..kernel_args import BodyModel, PairContacts
 from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, free_fall_share, gravity_kick,
                            spheres_miss, spheres_touch_time, time_to_contact)
 from .impact_terrain import IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED
-from .pair_geometry import NO_CONTACT, pair_point_now
+from .pair_geometry import NO_CONTACT, orthonormalized, pair_point_now, sphere_box_passes_clear
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -116,6 +116,7 @@ def pair_engagement(
     dri0 = drift_turned(dri, wi, t0, turns_i)
     drj0 = drift_turned(drj, wj, t0, turns_j)
     toi_left = left
+    closest = float(NO_CONTACT)
     for k in range(pairs.pair_point_count[p]):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
@@ -126,6 +127,7 @@ def pair_engagement(
         if engaged(now.separation, vn + wp.dot(kick, now.normal), left):
             out.acc[k] = 0.0
             toi_left = time_to_contact(now.separation, vn, toi_left)
+            closest = wp.min(closest, now.separation)
             if vn < -engage_speed(settings.gravity, settings.h):
                 out.hit = 1
             if vn < -settings.restitution_threshold:
@@ -143,6 +145,19 @@ def pair_engagement(
     # it meets an edge, so t* from the substep's start (gap / |v_n| along the normal there) is
     # refined on the geometry at t*, a few Newton steps on the gap
     sphere_box = (radius_i > 0.0) != (radius_j > 0.0)
+    if sphere_box and t0 == 0.0 and closest > 0.0:
+        # a spinning box whose point closes on its linear path may turn away instead: no impact
+        # (pair_geometry.sphere_box_passes_clear; the solve's rows let it go likewise)
+        sphere_is_i = radius_i > 0.0
+        box = wp.where(sphere_is_i, j, i)
+        rot_box = orthonormalized((wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drj0, dri0))
+                                  * solver.solver_ref_rot[box])
+        if sphere_box_passes_clear(wp.where(sphere_is_i, xi + dpi0, xj + dpj0), wp.where(sphere_is_i, vi, vj),
+                                   radius_i + radius_j, wp.where(sphere_is_i, xj + dpj0, xi + dpi0),
+                                   wp.where(sphere_is_i, vj, vi), wp.where(sphere_is_i, wj, wi), rot_box,
+                                   model.body_size[box], model.body_covered_faces[box], toi_left, left):
+            out.hit = 0
+            return out
     for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
         at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS],
                             pairs.pair_feature[p * POINTS], xi, xj, dpi + toi * vi, dpj + toi * vj,

@@ -222,3 +222,65 @@ def pair_point_now(
     out.arm_i = ri - (1.0 - follow_i) * relative + onto_surface
     out.arm_j = rj + follow_i * relative + onto_surface
     return out
+
+
+@wp.func
+def sphere_box_clear_at(t: float, c_sphere: wp.vec3, v_sphere: wp.vec3, radius: float, c_box: wp.vec3,
+                        v_box: wp.vec3, w_box: wp.vec3, rot_box: wp.mat33, half: wp.vec3, covered: int,
+                        margin: float) -> bool:
+    """Whether a sphere and a box moving freely at the given velocities are more than ``margin``
+    apart a time t on, the box turned by the exact rotation w t (not the linearised one of the rows)."""
+    turn = wp.identity(n=3, dtype=float)
+    speed = wp.length(w_box)
+    if speed > 0.0:
+        turn = wp.quat_to_matrix(wp.quat_from_axis_angle(w_box / speed, speed * t))
+    at = sphere_box_point(c_sphere + t * v_sphere, radius, c_box + t * v_box, turn * rot_box, half, covered, True)
+    return at.separation > margin
+
+
+@wp.func
+def sphere_box_passes_clear(
+    c_sphere: wp.vec3,
+    v_sphere: wp.vec3,
+    radius: float,
+    c_box: wp.vec3,
+    v_box: wp.vec3,
+    w_box: wp.vec3,
+    rot_box: wp.mat33,
+    half: wp.vec3,
+    covered: int,
+    toi: float,
+    left: float,
+) -> bool:
+    """Whether a sphere and a spinning box that the rows see closing pass each other clear within
+    the ``left`` of the substep: apart a third, two thirds and all of the way on.
+
+    A speculative row reads the closing speed of the box's point on its linear path, v + w x r,
+    and a fast-turning box's point sweeps an arc away from where that line goes (a face tilts
+    away, a corner swings past the ball).  A 0.2 kg box spinning at 34 rad/s 15 mm from a ball
+    was seen closing at 6.5 m/s and stopped by the row, though in free flight they pass 5.7 mm
+    apart: the stop is an inelastic impulse where nothing touched, and the pair lost up to 19 % of
+    its energy at e = 1.  Samples of the free motion are the test, for a pair apart now: at ``toi``,
+    when the straight paths touch, and at each quarter of the substep (a corner at 40 rad/s turns
+    0.17 rad a substep of 1/240 s, so a sample every 0.04 rad); a pair that does meet is apart at
+    none of them and keeps its row.  Between two samples dt apart a gap whose second derivative is
+    at most a can dip a dt^2 / 8 below both, so each sample must clear that margin: a bounds the
+    relative acceleration of the nearest points, |w|^2 |half| (the box's turn) plus u^2 / R (a
+    point passing the ball's surface at the relative speed u, at most |v_s - v_b| + |w| |half|),
+    and 4 float32 roundings of the centres are added (a ball grazing a box 0.03 mm clear 300 m
+    from the origin, where a float32 position steps 0.03 mm, was let through and then half
+    stopped by the next substep's rows: 2 % of its energy lost; held, its impact bounces it)."""
+    reach = wp.length(half)
+    turn = wp.length(w_box)
+    speed = wp.length(v_sphere - v_box) + turn * reach
+    sample = 0.25 * left
+    margin = ((turn * turn * reach + speed * speed / radius) * sample * sample / 8.0
+              + 4.0 * 1.2e-7 * (wp.length(c_sphere) + wp.length(c_box)))
+    if not sphere_box_clear_at(wp.clamp(toi, 0.0, left), c_sphere, v_sphere, radius, c_box, v_box, w_box, rot_box,
+                               half, covered, margin):
+        return False
+    for k in range(1, 5):
+        if not sphere_box_clear_at(float(k) * sample, c_sphere, v_sphere, radius, c_box, v_box, w_box,
+                                   rot_box, half, covered, margin):
+            return False
+    return True
