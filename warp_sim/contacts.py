@@ -87,6 +87,10 @@ class Contacts:
         # 1 where the pair's last relax let go of enough push to walk it down to the ground
         # (pair_solve.relax_chain_needed; written by pair_pass, read by chain_pass)
         self.pair_relax_chain = wp.zeros(m, dtype=wp.int32, device=device)
+        # 1 where the substep's impact stage found that a ball and a spinning box the rows see
+        # closing pass clear in free motion (pair_geometry.sphere_box_passes_clear): its solve
+        # rows let go.  Reset by pair_contact_times, written by the pair's impact thread.
+        self.pair_passes_clear = wp.zeros(m, dtype=wp.int32, device=device)
         # the patch of the pair's points for the substep, written by its warm start: centre and the
         # scale of its friction rows' arms (collide/contact_patch.py)
         self.pair_twist = wp.zeros(m, dtype=wp.vec4, device=device)

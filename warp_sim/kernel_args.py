@@ -106,6 +106,7 @@ class PairContacts:
     pair_normal_impulse: wp.array(dtype=float)
     pair_tangent_impulse: wp.array(dtype=wp.vec3)
     pair_relax_chain: wp.array(dtype=wp.int32)
+    pair_passes_clear: wp.array(dtype=wp.int32)
     pair_twist: wp.array(dtype=wp.vec4)  # the points' patch: centre, friction arm scale (collide/contact_patch.py)
 
 

@@ -255,6 +255,7 @@ class PairImpact:
     shift_j: wp.vec3
     hit: int
     toi: float
+    clear: int  # pair_engagement's: a ball and a spinning box that pass clear
 
 
 @wp.func(inline=True)
@@ -281,6 +282,7 @@ def impact_pair_velocity(
     bodies' own, or split ones: pair_overflow.py); writes nothing."""
     out = PairImpact()
     out.hit = 0
+    out.clear = 0
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
@@ -304,6 +306,7 @@ def impact_pair_velocity(
     if model.body_sphere_radius[i] > 0.0 or model.body_sphere_radius[j] > 0.0:
         t0 = pair_event_start(i, j, solver)
     engagement = pair_engagement(p, model, settings, pairs, solver, vi, wi, vj, wj, inv_mi, inv_mj, dpi, dpj, t0)
+    out.clear = engagement.clear
     if engagement.hit == 0:
         return out
     if engagement.bounces == 0:
@@ -376,6 +379,7 @@ def impact_pair(
     out = impact_pair_velocity(p, model, settings, pairs, solver, solver.solver_v[i], solver.solver_w[i],
                                solver.solver_v[j], solver.solver_w[j], inv_mi, inv_mj, solver.solver_inv_inertia[i],
                                solver.solver_inv_inertia[j])
+    pairs.pair_passes_clear[p] = out.clear
     if out.hit == 0:
         return
     # only dynamic bodies are written: a static body may sit in many pairs of one colour
@@ -463,6 +467,7 @@ def pair_contact_times(
     p = wp.tid() + tid_offset
     if p >= pair_count[0]:
         return
+    pairs.pair_passes_clear[p] = 0  # until this substep's impact stage finds otherwise
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]

@@ -198,6 +198,7 @@ def joint_pair(
         engagement = pair_engagement(p, model, settings, pairs, solver, joint.impact_v_start[i], joint.impact_w_start[i],
                                      joint.impact_v_start[j], joint.impact_w_start[j], inv_mi, inv_mj,
                                      solver.solver_drift_p[i], solver.solver_drift_p[j], 0.0)
+        pairs.pair_passes_clear[p] = engagement.clear
         if engagement.hit == 0:
             joint.impact_pair_event[p] = NOT_MEMBER
             return 0

@@ -11,7 +11,8 @@ from ..kernel_args import BodyModel, PairContacts
 from .impact_point import (coulomb_step, drift_turned, engage_speed, engaged, free_fall_share, gravity_kick,
                            spheres_miss, spheres_touch_time, time_to_contact)
 from .impact_terrain import IMPACT_ITERATIONS, IMPACT_SLIP_TOLERANCE, IMPACT_SPEED_TOLERANCE, NOT_ENGAGED
-from .pair_geometry import NO_CONTACT, orthonormalized, pair_point_now, sphere_box_passes_clear
+from .pair_geometry import (NO_CONTACT, orthonormalized, pair_point_now, sphere_box_curvature, sphere_box_passes_clear,
+                            straight_paths_surely_meet)
 from .solver_args import SolverBodies, StepSettings
 
 wp.set_module_options({"enable_backward": False})
@@ -27,12 +28,14 @@ TOI_GAP_TOLERANCE = 1.0e-5
 class PairEngagement:
     """Which points of a pair close within the substep (``acc``: 0 where engaged, NOT_ENGAGED
     elsewhere), when the pair touches (``toi``, from the substep's start), whether one closes
-    faster than the engage speed (``hit``) and faster than the restitution threshold (``bounces``)."""
+    faster than the engage speed (``hit``) and faster than the restitution threshold (``bounces``),
+    and whether it is a ball and a spinning box that pass clear instead (``clear``)."""
 
     acc: wp.vec4
     toi: float
     hit: int
     bounces: int
+    clear: int
 
 
 @wp.struct
@@ -98,6 +101,7 @@ def pair_engagement(
     out.acc = wp.vec4(NOT_ENGAGED)
     out.hit = 0
     out.bounces = 0
+    out.clear = 0
     ij = pairs.pair_body[p]
     i = ij[0]
     j = ij[1]
@@ -117,6 +121,7 @@ def pair_engagement(
     drj0 = drift_turned(drj, wj, t0, turns_j)
     toi_left = left
     closest = float(NO_CONTACT)
+    closing = float(0.0)
     for k in range(pairs.pair_point_count[p]):
         # (where the point sits follows the bodies' own masses, split or not)
         now = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS + k], pairs.pair_depth[p * POINTS + k],
@@ -128,6 +133,7 @@ def pair_engagement(
             out.acc[k] = 0.0
             toi_left = time_to_contact(now.separation, vn, toi_left)
             closest = wp.min(closest, now.separation)
+            closing = wp.max(closing, -vn)
             if vn < -engage_speed(settings.gravity, settings.h):
                 out.hit = 1
             if vn < -settings.restitution_threshold:
@@ -146,18 +152,24 @@ def pair_engagement(
     # refined on the geometry at t*, a few Newton steps on the gap
     sphere_box = (radius_i > 0.0) != (radius_j > 0.0)
     if sphere_box and t0 == 0.0 and closest > 0.0:
-        # a spinning box whose point closes on its linear path may turn away instead: no impact
-        # (pair_geometry.sphere_box_passes_clear; the solve's rows let it go likewise)
+        # a spinning box whose point closes on its straight path may turn away instead: no impact
+        # (pair_geometry.sphere_box_passes_clear), and the solve's rows let go (``clear``)
         sphere_is_i = radius_i > 0.0
         box = wp.where(sphere_is_i, j, i)
-        rot_box = orthonormalized((wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drj0, dri0))
-                                  * solver.solver_ref_rot[box])
-        if sphere_box_passes_clear(wp.where(sphere_is_i, xi + dpi0, xj + dpj0), wp.where(sphere_is_i, vi, vj),
-                                   radius_i + radius_j, wp.where(sphere_is_i, xj + dpj0, xi + dpi0),
-                                   wp.where(sphere_is_i, vj, vi), wp.where(sphere_is_i, wj, wi), rot_box,
-                                   model.body_size[box], model.body_covered_faces[box], toi_left, left):
-            out.hit = 0
-            return out
+        v_ball = wp.where(sphere_is_i, vi, vj)
+        v_box = wp.where(sphere_is_i, vj, vi)
+        w_box = wp.where(sphere_is_i, wj, wi)
+        curvature = sphere_box_curvature(v_ball, v_box, w_box, model.body_size[box], radius_i + radius_j)
+        if not straight_paths_surely_meet(closing, toi_left, left, curvature):
+            rot_box = orthonormalized((wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drj0, dri0))
+                                      * solver.solver_ref_rot[box])
+            if sphere_box_passes_clear(wp.where(sphere_is_i, xi + dpi0, xj + dpj0), v_ball, radius_i + radius_j,
+                                       wp.where(sphere_is_i, xj + dpj0, xi + dpi0), v_box, w_box, rot_box,
+                                       model.body_size[box], model.body_covered_faces[box], toi_left, curvature,
+                                       left):
+                out.hit = 0
+                out.clear = 1
+                return out
     for _refine in range(wp.where(sphere_box, SPHERE_BOX_REFINES, 0)):
         at = pair_point_now(pairs.pair_normal[p], pairs.pair_point[p * POINTS], pairs.pair_depth[p * POINTS],
                             pairs.pair_feature[p * POINTS], xi, xj, dpi + toi * vi, dpj + toi * vj,

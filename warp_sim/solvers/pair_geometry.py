@@ -239,6 +239,26 @@ def sphere_box_clear_at(t: float, c_sphere: wp.vec3, v_sphere: wp.vec3, radius: 
 
 
 @wp.func
+def sphere_box_curvature(v_sphere: wp.vec3, v_box: wp.vec3, w_box: wp.vec3, half: wp.vec3, radius: float) -> float:
+    """A bound on the second derivative of a sphere-box gap in free motion: |w|^2 |half| (the
+    box's turn) + u^2 / R (a point passing the ball's surface at the relative speed u, at most
+    |v_s - v_b| + |w| |half|)."""
+    reach = wp.length(half)
+    turn = wp.length(w_box)
+    speed = wp.length(v_sphere - v_box) + turn * reach
+    return turn * turn * reach + speed * speed / radius
+
+
+@wp.func
+def straight_paths_surely_meet(closing: float, toi: float, left: float, curvature: float) -> bool:
+    """Whether a pair whose straight paths close at ``closing`` and touch at ``toi`` overlap at the
+    substep's end by more than the free motion can bend away from them, curvature left^2 / 2: then
+    it meets whatever its turn (most closing rows of a landing rain), and
+    sphere_box_passes_clear is not asked."""
+    return closing * (left - toi) > 0.5 * curvature * left * left
+
+
+@wp.func
 def sphere_box_passes_clear(
     c_sphere: wp.vec3,
     v_sphere: wp.vec3,
@@ -250,37 +270,31 @@ def sphere_box_passes_clear(
     half: wp.vec3,
     covered: int,
     toi: float,
+    curvature: float,
     left: float,
 ) -> bool:
-    """Whether a sphere and a spinning box that the rows see closing pass each other clear within
-    the ``left`` of the substep: apart a third, two thirds and all of the way on.
+    """Whether a sphere and a spinning box that the rows see closing (touching at ``toi`` on their
+    straight paths) pass each other clear within the ``left`` of the substep; ``curvature`` is
+    sphere_box_curvature's bound a.
 
-    A speculative row reads the closing speed of the box's point on its linear path, v + w x r,
+    A speculative row reads the closing speed of the box's point on its straight path, v + w x r,
     and a fast-turning box's point sweeps an arc away from where that line goes (a face tilts
-    away, a corner swings past the ball).  A 0.2 kg box spinning at 34 rad/s 15 mm from a ball
-    was seen closing at 6.5 m/s and stopped by the row, though in free flight they pass 5.7 mm
-    apart: the stop is an inelastic impulse where nothing touched, and the pair lost up to 19 % of
-    its energy at e = 1.  Samples of the free motion are the test, for a pair apart now: at ``toi``,
-    when the straight paths touch, and at each quarter of the substep (a corner at 40 rad/s turns
-    0.17 rad a substep of 1/240 s, so a sample every 0.04 rad); a pair that does meet is apart at
-    none of them and keeps its row.  Between two samples dt apart a gap whose second derivative is
-    at most a can dip a dt^2 / 8 below both, so each sample must clear that margin: a bounds the
-    relative acceleration of the nearest points, |w|^2 |half| (the box's turn) plus u^2 / R (a
-    point passing the ball's surface at the relative speed u, at most |v_s - v_b| + |w| |half|),
-    and 4 float32 roundings of the centres are added (a ball grazing a box 0.03 mm clear 300 m
-    from the origin, where a float32 position steps 0.03 mm, was let through and then half
-    stopped by the next substep's rows: 2 % of its energy lost; held, its impact bounces it)."""
-    reach = wp.length(half)
-    turn = wp.length(w_box)
-    speed = wp.length(v_sphere - v_box) + turn * reach
+    away, a corner swings past the ball): pairs that in a float64 torque-free reference pass 1.9
+    to 5.7 mm apart were stopped by the row, an inelastic impulse where nothing touched (0.5 to
+    3 % of a ball-box pair's energy lost at e = 1).  The free motion (the box turned by the exact
+    rotation w t) is sampled at ``toi`` and at each quarter of the substep (a corner at 40 rad/s
+    turns 0.17 rad a substep of 1/240 s, a sample every 0.04 rad).  Between two samples dt apart
+    the gap can dip a dt^2 / 8 below both, so each must clear that margin plus 4 float32 roundings
+    of the centres (a ball grazing a box 0.03 mm clear 300 m from the origin, where a float32
+    position steps 0.03 mm, was let through and then half stopped by the next substep's rows: 2 %
+    of its energy lost; held, its impact bounces it)."""
     sample = 0.25 * left
-    margin = ((turn * turn * reach + speed * speed / radius) * sample * sample / 8.0
-              + 4.0 * 1.2e-7 * (wp.length(c_sphere) + wp.length(c_box)))
-    if not sphere_box_clear_at(wp.clamp(toi, 0.0, left), c_sphere, v_sphere, radius, c_box, v_box, w_box, rot_box,
-                               half, covered, margin):
-        return False
-    for k in range(1, 5):
-        if not sphere_box_clear_at(float(k) * sample, c_sphere, v_sphere, radius, c_box, v_box, w_box,
-                                   rot_box, half, covered, margin):
+    margin = curvature * sample * sample / 8.0 + 4.0 * 1.2e-7 * (wp.length(c_sphere) + wp.length(c_box))
+    # one call site for the five samples (k = 0: toi): each inlined copy of the narrow phase slowed
+    # the solve sweeps that carry it
+    for k in range(5):
+        t = wp.where(k == 0, wp.clamp(toi, 0.0, left), float(k) * sample)
+        if not sphere_box_clear_at(t, c_sphere, v_sphere, radius, c_box, v_box, w_box, rot_box, half, covered,
+                                   margin):
             return False
     return True

@@ -225,6 +225,7 @@ def overflow_impact_pass(
         out = impact_pair_velocity(p, model, settings, pairs, solver, vel.vi, vel.wi, vel.vj, vel.wj, split_i * inv_mi,
                                    split_j * inv_mj, split_i * solver.solver_inv_inertia[i],
                                    split_j * solver.solver_inv_inertia[j])
+        pairs.pair_passes_clear[p] = out.clear
         if out.hit == 0:
             continue
         if inv_mi > 0.0:

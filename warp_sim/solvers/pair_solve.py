@@ -15,8 +15,7 @@ from .impact import impact_pair, pair_event_start
 from .impact_joint import IMPACT_BOUNCE, IMPACT_JOINT, IMPACT_SEQUENTIAL
 from .impact_point import engage_speed, spheres_miss
 from .contact_rows import closed_contact_bias, closed_during_substep, loaded_soft
-from .pair_geometry import (PairVelocity, orthonormalized, pair_point_now, read_pair_velocity,
-                            sphere_box_passes_clear)
+from .pair_geometry import PairVelocity, pair_point_now, read_pair_velocity
 from .rolling import hold_ball_on_static, static_ball_side
 from .solver_args import SolverBodies, StepSettings
 from .staged import sweep_body_terrain
@@ -174,8 +173,6 @@ def solve_pair_points(
         light_body = wp.where(own_inv_mi > own_inv_mj, i, j)
         wp.atomic_max(solver.solver_load_mass, light_body, heavy_mass)
     spheres_apart = model.body_sphere_radius[i] > 0.0 and model.body_sphere_radius[j] > 0.0
-    sphere_is_i = model.body_sphere_radius[i] > 0.0
-    sphere_box = sphere_is_i != (model.body_sphere_radius[j] > 0.0)
     reach = model.body_sphere_radius[i] + model.body_sphere_radius[j]
     # two balls whose last impact of the substep was with each other are looked at from it, t0, on
     # (impact.impact_pair_velocity says why): the start pose plus the shifts is where they never
@@ -255,19 +252,11 @@ def solve_pair_points(
                         # along the line of centres closes, the balls do not (impact_point.spheres_miss);
                         # the row lets go of what it holds and pushes nothing
                         bias = wp.max(bias, -vn)
-                    elif sphere_box and vn + bias < 0.0:
-                        # a spinning box that the row sees closing may turn away instead
-                        # (pair_geometry.sphere_box_passes_clear): then the row lets go too
-                        box = wp.where(sphere_is_i, j, i)
-                        c_box = wp.where(sphere_is_i, xj + at_pj, xi + at_pi + shift)
-                        rot_box = orthonormalized((wp.identity(n=3, dtype=float) + wp.where(sphere_is_i, drift_rj, drift_ri))
-                                                  * solver.solver_ref_rot[box])
-                        if sphere_box_passes_clear(wp.where(sphere_is_i, xi + at_pi + shift, xj + at_pj),
-                                                   wp.where(sphere_is_i, vel.vi, vel.vj), reach, c_box,
-                                                   wp.where(sphere_is_i, vel.vj, vel.vi), wp.where(sphere_is_i, vel.wj, vel.wi),
-                                                   rot_box, model.body_size[box], model.body_covered_faces[box],
-                                                   separation / -vn, left):
-                            bias = wp.max(bias, -vn)
+                    elif mode == MODE_SOLVE and pairs.pair_passes_clear[p] != 0:
+                        # a ball and a spinning box that the substep's impact stage found passing
+                        # clear in free motion (pair_geometry.sphere_box_passes_clear; the test lives
+                        # there, out of the sweeps, whose every row it slowed): the row lets go too
+                        bias = wp.max(bias, -vn)
                 elif mode == MODE_SOLVE:
                     soft = settings.soft
                     if heavy_mass > 0.0:
