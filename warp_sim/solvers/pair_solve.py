@@ -296,7 +296,7 @@ def solve_pair_points(
                 pairs.pair_tangent_impulse[slot] = new_t
                 vel = apply_pair_impulse(vel, new_t - old_t, ri_t, rj_t, inv_mi, inv_mj, inv_ii, inv_ij)
                 normal_total = normal_total + new_acc
-                if ball_side != 0:
+                if ball_side != 0 and mode == MODE_SOLVE:
                     hold = hold_ball_on_static(vel, ball_side, n, ri, rj, inv_mi, inv_mj, inv_ii, inv_ij, friction,
                                                rolling_arm, new_acc, new_t, pairs.pair_tangent_impulse[p * POINTS + 1])
                     vel = hold.vel

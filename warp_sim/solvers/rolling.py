@@ -91,8 +91,9 @@ def hold_ball_on_static(vel: PairVelocity, ball_side: int, n: wp.vec3, ri: wp.ve
     """hold_ball for a ball's pair contact with a static body (a box floor): the static side does
     not move, so the ball is held still as on the terrain.  Without it friction and rolling
     resistance, taken in turn, undid each other here too: a ball on a static box tilted 1 degree
-    under atan(c_r) (c_r 0.1) crept 13 mm in 5 s.  The pair stores impulses on body i; the ball's
-    are those times ``ball_side``."""
+    under atan(c_r) (c_r 0.1) crept 13 mm in 5 s.  Taken in the solve sweeps only: the relax starts
+    from a held ball and the hold there changed nothing but the relax kernels' registers.  The pair
+    stores impulses on body i; the ball's are those times ``ball_side``."""
     side = float(ball_side)
     ball = BodyVelocity()
     ball.rolling_impulse = side * rolling_impulse
