@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from warp_sim.cli import main
-from warp_sim.recording import FRAME_KEYS, RunWriter, chunk_dir, load_run
+from warp_sim.recording import FRAME_KEYS, RunWriter, chunk_dir, chunk_files, load_run
 from warp_sim.run import format_rate, format_summary, run, static_record
 from warp_sim.scene import load_scene
 
@@ -253,9 +253,8 @@ def _wait_for_chunks(out: Path, proc, count: int = 1):
     import time
 
     deadline = time.monotonic() + 120
-    # whole chunks only: a chunk being written is "chunk_*.npz.tmp.npz" until it is renamed, and
-    # a kill while only that existed left nothing to read
-    while len([p for p in chunk_dir(out).glob("chunk_*.npz") if not p.name.endswith(".tmp.npz")]) < count:
+    # whole chunks only: a kill while only a chunk being written existed left nothing to read
+    while len(chunk_files(chunk_dir(out))) < count:
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline, "no chunk was written"
         time.sleep(0.05)

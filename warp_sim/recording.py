@@ -169,7 +169,8 @@ class RunWriter:
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
-def _chunk_files(directory: Path) -> list[Path]:
+def chunk_files(directory: Path) -> list[Path]:
+    """The whole chunks in ``directory``, in order (a chunk being written has a .tmp.npz name)."""
     return sorted(p for p in directory.glob("chunk_*.npz") if not p.name.endswith(".tmp.npz"))
 
 
@@ -183,7 +184,7 @@ def _write_npy_entry(zf: zipfile.ZipFile, name: str, shape: tuple, dtype, pieces
 
 
 def _join(directory: Path, out: Path, static: dict, summary: dict, metadata: dict, bodies: int):
-    files = _chunk_files(directory)
+    files = chunk_files(directory)
     counts = []
     for path in files:
         with np.load(path) as data:
@@ -233,7 +234,7 @@ def load_run(path) -> dict:
         out = {key: _plain(data[key]) for key in data.files}
     metadata = json.loads((directory / "metadata.json").read_text())
     parts = {key: [] for key in FRAME_KEYS}
-    for file in _chunk_files(directory):
+    for file in chunk_files(directory):
         with np.load(file, allow_pickle=False) as data:
             for key in FRAME_KEYS:
                 parts[key].append(data[key])

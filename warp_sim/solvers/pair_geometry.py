@@ -290,8 +290,8 @@ def sphere_box_passes_clear(
     of its energy lost; held, its impact bounces it)."""
     sample = 0.25 * left
     margin = curvature * sample * sample / 8.0 + 4.0 * 1.2e-7 * (wp.length(c_sphere) + wp.length(c_box))
-    # one call site for the five samples (k = 0: toi): each inlined copy of the narrow phase slowed
-    # the solve sweeps that carry it
+    # one call site for the five samples (k = 0: toi): each inlined copy of the narrow phase grows
+    # the impact kernels that carry it
     for k in range(5):
         t = wp.where(k == 0, wp.clamp(toi, 0.0, left), float(k) * sample)
         if not sphere_box_clear_at(t, c_sphere, v_sphere, radius, c_box, v_box, w_box, rot_box, half, covered,

@@ -99,13 +99,13 @@ def hold_ball_on_static(vel: PairVelocity, ball_side: int, n: wp.vec3, ri: wp.ve
     ball.rolling_impulse = side * rolling_impulse
     arm = ri
     inv_mass = inv_mi
-    inv_inertia = inv_ii[0, 0]
+    inv_inertia = isotropic_inverse(inv_ii)
     ball.v = vel.vi
     ball.w = vel.wi
     if ball_side < 0:
         arm = rj
         inv_mass = inv_mj
-        inv_inertia = inv_ij[0, 0]
+        inv_inertia = isotropic_inverse(inv_ij)
         ball.v = vel.vj
         ball.w = vel.wj
     hold = hold_ball(ball, n, arm, inv_mass, inv_inertia, friction, rolling_limit, normal_impulse,
