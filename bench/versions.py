@@ -54,6 +54,8 @@ VARIANTS = {
     "face friction at points": {"face_friction": "points"},
     # boxes tested at their checkpoints alone, blind to crests between them (collide/face_search.py)
     "checkpoints only": {"face_search": False},
+    # every body's terrain contacts searched every pass, still ones too (collide/still_contacts.py)
+    "search every pass": {"still_contacts": False},
 }
 
 # Per-stage split.  This host's speed swings by up to 2x over minutes (other tenants), so one

@@ -79,6 +79,9 @@ class SimConfig:
     # boxes on a Fourier terrain: the support face's checkpoints also see crests between them
     # (collide/face_search.py); False: the checkpoints alone, faster, and blind to those crests
     face_search: bool = True
+    # a still body's terrain contacts carried to its new pose instead of searched again
+    # (collide/still_contacts.py); False: every body searched every pass
+    still_contacts: bool = True
     body_contact: bool = True
     broad_phase: str = "grid"
     contact_max: int = 0

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .collide.still_contacts import NO_ANCHOR
 from .schedule.coloring import COLOR_COUNT
 
 POINTS_PER_PAIR = 4
@@ -66,6 +67,8 @@ class Contacts:
         self.terrain_contact_tangent_impulse = wp.zeros(n, dtype=wp.vec3, device=device)
         self.terrain_contact_surface = wp.zeros(n, dtype=wp.vec2, device=device)
         self.terrain_contact_count = wp.zeros(max(body_count, 1), dtype=wp.int32, device=device)
+        self.terrain_contact_anchor_pos = wp.full(max(body_count, 1), wp.vec3(NO_ANCHOR), dtype=wp.vec3, device=device)
+        self.terrain_contact_anchor_quat = wp.zeros(max(body_count, 1), dtype=wp.quat, device=device)
         self.device = device
         self._alloc_pairs(pair_max)
 
@@ -120,6 +123,11 @@ class Contacts:
                              self.prev_pair_tangent_impulse],
                             keep):
             wp.copy(dst, src, count=min(dst.size, src.size))
+
+    def forget_anchors(self):
+        """No body's terrain slots are carried at the next pass: every one is searched in full
+        (collide/still_contacts.py; after the model or the settings changed)."""
+        self.terrain_contact_anchor_pos.fill_(wp.vec3(NO_ANCHOR))
 
     def count(self) -> int:
         terrain = int(np.count_nonzero(self.terrain_contact_active.numpy()[: self.slot_count]))

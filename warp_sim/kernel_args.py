@@ -90,6 +90,9 @@ class TerrainContacts:
     terrain_contact_tangent_impulse: wp.array(dtype=wp.vec3)
     terrain_contact_surface: wp.array(dtype=wp.vec2)
     terrain_contact_count: wp.array(dtype=wp.int32)
+    # per body: the pose its slots were last found at (collide/still_contacts.py)
+    terrain_contact_anchor_pos: wp.array(dtype=wp.vec3)
+    terrain_contact_anchor_quat: wp.array(dtype=wp.quat)
 
 
 @wp.struct

@@ -200,10 +200,10 @@ class Simulator:
         return tuple(float(share * self.substep_dt * g) for g in self.config.gravity)
 
     def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False,
-                struck_only: bool = False):
-        """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between
-        a step's collision passes and stored relative to the pass's pose; ``struck_only``: only the
-        boxes whose reach a partner widened (collide_terrain, collide/struck_reach.py)."""
+                struck_only: bool = False, carry_still: bool = True):
+        """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between a
+        step's passes, relative to the pass's pose; ``struck_only``: only the boxes whose reach a partner
+        widened (collide/struck_reach.py); ``carry_still``: still bodies' slots carried (still_contacts.py)."""
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
@@ -217,6 +217,7 @@ class Simulator:
                 # Settings
                 h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
                 int(refresh_spheres), int(struck_only), int(self.config.face_search), int(self.closest_jet),
+                int(carry_still and self.config.still_contacts),
                 # State in, Solver in, In
                 bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
                 # Contacts
@@ -457,8 +458,9 @@ class Simulator:
         self.invalidate_graph()
 
     def invalidate_graph(self):
-        """Call after changing model or settings: the captured graph baked the old values in."""
+        """Call after changing model or settings: the captured graph (and still bodies' slots) hold the old."""
         self.graph = None
+        self.contacts.forget_anchors()
 
     def check_finite(self):
         if int(self.bad_count.numpy()[0]) == 0:
@@ -496,7 +498,8 @@ class Simulator:
         c = self.contacts
         arrays = [*self.state.fields(), c.terrain_contact_active, c.terrain_contact_point, c.terrain_contact_normal,
                   c.terrain_contact_depth, c.terrain_contact_normal_impulse, c.terrain_contact_tangent_impulse,
-                  c.terrain_contact_surface, self.solver.sim_step, self.solver.solver_support]
+                  c.terrain_contact_surface, c.terrain_contact_anchor_pos, c.terrain_contact_anchor_quat,
+                  self.solver.sim_step, self.solver.solver_support]
         if self.sleep is not None:
             arrays += [self.sleep.body_sleep_timer, self.sleep.body_sleep_speed, self.sleep.body_sleep_rise,
                        self.sleep.body_inv_mass_awake]
@@ -611,7 +614,7 @@ class Simulator:
         # start the probe's closest-point searches where the live contacts left off
         wp.copy(probe.terrain_contact_active, self.contacts.terrain_contact_active)
         wp.copy(probe.terrain_contact_surface, self.contacts.terrain_contact_surface)
-        self.collide(self.state, probe, self.substep_dt, 0.0)
+        self.collide(self.state, probe, self.substep_dt, 0.0, carry_still=False)
         depths = probe.active_terrain_depths()
         deepest = float(max(depths.max(), 0.0)) if depths.size else 0.0
         if self.pairs is not None:
@@ -633,11 +636,8 @@ class Simulator:
         t = self.model.terrain
         if isinstance(t, FourierTerrain):
             return {
-                "terrain_kind": "fourier",
-                "terrain_amplitudes": t.amplitude_table(),
-                "terrain_phases": t.phase_table(),
-                "terrain_frequency": t.frequency,
-                "terrain_scale": np.asarray(t.scale),
+                "terrain_kind": "fourier", "terrain_amplitudes": t.amplitude_table(), "terrain_phases": t.phase_table(),
+                "terrain_frequency": t.frequency, "terrain_scale": np.asarray(t.scale),
                 "terrain_offset": np.asarray(t.offset),
             }
         if isinstance(t, PlaneTerrain):

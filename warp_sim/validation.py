@@ -412,6 +412,7 @@ SIM_SCHEMA = {
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),
     "face_search": Boolean(),
+    "still_contacts": Boolean(),
     "solver": Choice(SOLVERS),
     "sleep": Boolean(),
     "sleep_velocity": Number(gt=0),

@@ -79,6 +79,7 @@ from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSam
 from ..types import SHAPE_SPHERE
 from .closest_jet import jet_step
 from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
+from .still_contacts import NO_ANCHOR, STILL_SPEED, STILL_TRAVEL, carry_still_contacts, travel_since, window_floor
 from .struck_reach import reachable_speed
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
@@ -329,6 +330,7 @@ def collide_terrain(
     struck_only: int,
     face_search: int,
     jet_search: int,
+    still_contacts: int,
     # State in
     state_in: BodyState,
     # Solver in (the pose of the step's pass)
@@ -386,6 +388,28 @@ def collide_terrain(
     face = wp.vec2i(0, 0)
     half = model.body_size[body]
     cell = wp.vec3(0.0)
+    reach_speed = float(0.0)  # a box's points: the fastest a contact event could make them (struck_reach.py)
+    if dynamic and not is_sphere:
+        reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
+                                      model.body_inv_inertia[body], model.body_inv_mass[body], half)
+    floor = float(0.0)  # the windows' least approach speed while still bodies are carried (still_contacts.py)
+    if still_contacts != 0 and terrain.terrain_kind == TERRAIN_FOURIER:
+        floor = window_floor(h, gap_scale)
+        if refresh_spheres == 0 and struck_only == 0 and dynamic:
+            reach = float(0.0)
+            spin = wp.length(omega)
+            quiet = wp.length(v)
+            if not is_sphere:
+                reach = wp.length(half)
+                cell = model.body_checkpoint_cell[body]
+                quiet = wp.max(reach_speed, quiet + spin * reach) + spin * (cell[0] + cell[1] + cell[2])
+            travel = travel_since(x, state_in.body_quat[body], contacts.terrain_contact_anchor_pos[body],
+                                  contacts.terrain_contact_anchor_quat[body], reach)
+            if quiet <= STILL_SPEED and travel <= STILL_TRAVEL:
+                contacts.terrain_contact_count[body] = carry_still_contacts(
+                    start, count, x, rot, v, omega, radius, is_sphere, reach_speed, h, gravity_length,
+                    speculative_margin, floor, model.checkpoint_local, contacts)
+                return
     if fourier_box:
         cell = model.body_checkpoint_cell[body]  # a sphere's thread does not read it
         center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
@@ -394,10 +418,6 @@ def collide_terrain(
         # the support face's checkpoints climb to the crests within their cells (face_search.py)
         face = support_face(rot, -fourier_normal(center.grad))
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
-    reach_speed = float(0.0)  # a box's points: the fastest a contact event could make them (struck_reach.py)
-    if dynamic and not is_sphere:
-        reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
-                                      model.body_inv_inertia[body], model.body_inv_mass[body], half)
     if struck_only != 0:
         if not dynamic or is_sphere or body_struck_reach[body] <= reach_speed:
             return
@@ -442,7 +462,8 @@ def collide_terrain(
                     if contacts.terrain_contact_active[slot] == 0:
                         # the ground under the centre is at most slope_bound * seed above the seed's
                         lower_bound = (x[1] - s0.height - terrain.terrain_slope_bound * seed) / gap_scale
-                        can_touch = lower_bound - radius < speculative_margin + h * wp.length(v) + h * h * gravity_length
+                        can_touch = lower_bound - radius < (speculative_margin + h * wp.max(wp.length(v), floor)
+                                                                   + h * h * gravity_length)
                     if can_touch:
                         xz, s = closest_or_start(terrain, x, start_xz, s0, warm * jet_search)
                         surface = wp.vec3(xz[0], s.height, xz[1])
@@ -481,7 +502,7 @@ def collide_terrain(
                     arm = point - x
                     # the gap the checkpoint (anywhere in its cell, when searched: face_search.py) can
                     # close in one substep
-                    speed = wp.max(wp.length(v + wp.cross(omega, arm)), reach_speed)
+                    speed = wp.max(wp.max(wp.length(v + wp.cross(omega, arm)), reach_speed), floor)
                     if searched:
                         speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
                     window = speculative_margin + h * speed + h * h * gravity_length
@@ -506,7 +527,7 @@ def collide_terrain(
                             depth = (s.height - point[1]) * normal[1]
 
         point_vel = v + wp.cross(omega, point - x)
-        approach = wp.max(wp.max(-wp.dot(point_vel, normal), 0.0), reach_speed)
+        approach = wp.max(wp.max(wp.max(-wp.dot(point_vel, normal), 0.0), reach_speed), floor)
         gap_closable = speculative_margin + h * approach + h * h * gravity_length
         # a refreshed sphere keeps its slot whatever the gap: the step's pass opened it for the
         # whole step, and closing it here would hide the surface from the later substeps
@@ -525,3 +546,11 @@ def collide_terrain(
             contacts.terrain_contact_normal_impulse[slot] = 0.0
             contacts.terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
     contacts.terrain_contact_count[body] = active
+    if still_contacts != 0:
+        # the pose these slots were found at; none where they were found mid-step or for a body
+        # without mass (a sleeper's slots are searched in full when it wakes)
+        anchor = wp.vec3(NO_ANCHOR)
+        if dynamic and refresh_spheres == 0:
+            anchor = x
+        contacts.terrain_contact_anchor_pos[body] = anchor
+        contacts.terrain_contact_anchor_quat[body] = state_in.body_quat[body]
