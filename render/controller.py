@@ -56,6 +56,7 @@ PARAMS: dict[str, Param] = {
     "substeps": Param("sim", "int", 1, 64),
     "auto_substeps": Param("sim", "bool", label="more substeps where columns sag or piles are landed on"),
     "face_search": Param("sim", "bool", label="boxes find crests between their checkpoints"),
+    "still_contacts": Param("sim", "bool", label="still bodies keep their terrain contacts"),
     "gravity": Param("sim", "vec3", -100.0, 100.0, label="gravity [m/s^2]"),
     "integrator": Param("sim", "choice", choices=tuple(INTEGRATORS)),
     "rotation": Param("sim", "choice", choices=tuple(ROTATIONS)),

@@ -207,6 +207,7 @@ class Gui:
                 imgui.text_colored(DIM_COLOR, f"running {plan.substeps} substeps: {plan.reason()}")
             self._vec3("gravity", 0.1)
             self._bool("face_search")
+            self._bool("still_contacts")
             self._choice("integrator")
             self._choice("rotation")
             self._int("iterations", 1, 32)

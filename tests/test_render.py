@@ -381,6 +381,8 @@ def test_gui_parameter_path_updates_physics_and_terrain_block(viewer):
     assert c.set_param("face_search", False) is False and c.sim.config.face_search is False
     assert c.set_param("face_search", "yes") is False  # only real booleans are taken
     c.set_param("face_search", True)
+    assert c.set_param("still_contacts", False) is False and c.sim.config.still_contacts is False
+    c.set_param("still_contacts", True)
 
     c.set_param("tess_max_level", 20.0)
     assert viewer.terrain.block.get("terrain_tess")[3] == pytest.approx(20.0)
