@@ -181,3 +181,22 @@ def test_a_slot_that_would_open_is_open_when_carried(speed, device):
     carried, searched, _ = carried_against_searched(sim)
     assert searched.terrain_contact_active.numpy()[0] == 1
     assert carried.terrain_contact_active.numpy()[0] == 1
+
+
+def test_sleepers_have_no_anchor_and_are_searched_when_woken(device):
+    """A sleeper's mass is hidden from the step, so its slots are not found while it sleeps and it
+    keeps no anchor; woken, it is searched in full at the next pass (not carried from slots that
+    were found, or left closed, while it slept)."""
+    sim = cases.terrain_drop(16, "mix", terrain=FourierTerrain(amplitude=0.3), body_contact=True, spacing=0.9,
+                             sleep=True, device=device)
+    sim.step(240)
+    awake = sim.awake_count()
+    assert awake < 16  # the pile has fallen asleep
+    anchors = sim.contacts.terrain_contact_anchor_pos.numpy()
+    asleep = sim.physics_model.body_inv_mass.numpy() == 0.0
+    assert asleep.any() and np.all(anchors[asleep] > 1.0e29)
+    sim.wake_all()
+    carried, _, moved_and_carried = carried_against_searched(sim)
+    # the pass after the wake searched every woken body: its anchor is its pose of now
+    assert not moved_and_carried[asleep].any()
+    np.testing.assert_array_equal(carried.terrain_contact_anchor_pos.numpy()[asleep], sim.state.body_pos.numpy()[asleep])
