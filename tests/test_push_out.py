@@ -230,3 +230,38 @@ def test_a_column_planned_past_the_budget_keeps_the_soft_law(ratio, device):
     # the soft spring's sag, as planned (column_sag.py: within 5 % of what the columns measure)
     assert sink == pytest.approx(plan.sag, rel=0.05)
     assert fastest < 1.0
+
+
+SQUEEZED_OUT_WITHOUT_FRICTION = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, found and not fixed): without friction a light cube between two heavy ones is "
+    "squeezed out sideways: the soft contacts let the upper cube tilt over the displaced light one, and its face "
+    "becomes a ramp under 1e5 N"))
+
+
+@pytest.mark.parametrize("below, above, friction", [
+    pytest.param(below, above, mu) for below in (3e3, 1e4, 3e4) for above in (3e3, 1e4) for mu in (0.3, 0.5, 1.0)
+] + [pytest.param(1e4, 1e4, 0.0, marks=SQUEEZED_OUT_WITHOUT_FRICTION)])
+def test_a_light_cube_between_two_heavy_ones_stands(below, above, friction, device):
+    """A 1 kg cube set down at rest between two cubes of 3e3 to 3e4 kg (the column the substep
+    plan raises to 30 to 55 substeps for, its sag planned just under column_sag).  Its loaded
+    contacts are not pushed back past the budget (contact_rows.loaded_soft): the load settling
+    overshot the plan's sag by a fraction of a millimetre, and the push through the light cube,
+    which two sweeps cannot converge against a body 1e4 times heavier, rang until the light cube
+    was thrown out at 5 to 11 m/s (9 of these 18 cases).  After the first second, as a resting
+    stack: no point faster than sleep_velocity, the speed below which the sleep rule takes a body
+    for still, and no body moving by a tenth of column_sag in two seconds."""
+    b = ModelBuilder(Material(restitution=0.0, friction=friction))
+    b.set_terrain(PlaneTerrain())
+    b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
+    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 1.5, 0.0))
+    b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 2.5, 0.0))
+    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
+    sim.step(60)
+    start = sim.state.body_pos.numpy().copy()
+    fastest = 0.0
+    for _ in range(120):
+        sim.step()
+        fastest = max(fastest, float(np.linalg.norm(sim.state.body_vel.numpy(), axis=1).max()))
+    moved = float(np.linalg.norm(sim.state.body_pos.numpy() - start, axis=1).max())
+    assert fastest < sim.config.sleep_velocity, fastest
+    assert moved < 0.1 * sim.config.column_sag, moved

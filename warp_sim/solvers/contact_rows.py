@@ -62,6 +62,10 @@ def closed_contact_bias(separation: float, h: float, soft: wp.vec4, max_push_vel
     return bias
 
 
+# [m] the depth past which a contact is pushed back within the substep, for a loaded one (loaded_soft)
+NO_PUSH_DEPTH = wp.constant(1.0e30)
+
+
 @wp.func
 def loaded_soft(load_mass: float, normal_mass: float, soft: wp.vec4, soft_load: wp.vec3) -> wp.vec4:
     """The soft coefficients (biasRate, massScale, impulseScale, soft_depth) of a closed body-body
@@ -83,7 +87,16 @@ def loaded_soft(load_mass: float, normal_mass: float, soft: wp.vec4, soft_load: 
     variants were tried first: the load read from the accumulated impulse (acc / (|g| h)) also
     rose at every landing, so a rain's terrain contacts changed too; and a stiffness following
     that load lagged it by a substep and pumped a rocking mode of a 100:1 pair.  Without gravity
-    (soft_load[2] = 0) nothing carries a load and nothing is changed."""
+    (soft_load[2] = 0) nothing carries a load and nothing is changed.
+
+    Such a contact is also not pushed back past the budget (closed_contact_bias; soft[3] becomes
+    NO_PUSH_DEPTH).  Its depth is the load's: the substep plan sets the sag just under the budget
+    (a 1e4 kg cube on a 1 kg cube between two 1e4 kg cubes: 7.3 mm planned against 7.5), and the
+    load settling overshoots it by a fraction of a millimetre.  Pushed back within the substep at
+    up to max_push_velocity, through a body 1e4 times lighter that two sweeps cannot converge, the
+    overshoot rang: the light cube was thrown out at 10 m/s (50 m/s with mu = 0), the heavy one
+    above rising off it.  A blow driving a light body deep into a heavy one is still met by the
+    soft law's own push, biasRate s up to max_push_velocity."""
     load = load_mass * soft_load[2] / normal_mass  # M / m_eff, or 0 without gravity
     zeta = soft_load[1]
     if load <= zeta * zeta:
@@ -92,8 +105,9 @@ def loaded_soft(load_mass: float, normal_mass: float, soft: wp.vec4, soft_load: 
     a1 = 2.0 * wp.sqrt(load) + h_omega
     a2 = h_omega * a1
     a3 = 1.0 / (1.0 + a2)
-    # biasRate = omega / a1 = h omega^2 / a2, and h omega^2 = soft[0] a2_old with a2_old = soft[1] / soft[2]
-    return wp.vec4(soft[0] * (soft[1] / soft[2]) / a2, a2 * a3, a3, soft[3])
+    # biasRate = omega / a1 = h omega^2 / a2, and h omega^2 = soft[0] a2_old with a2_old = soft[1] / soft[2];
+    # no push-back past the budget (NO_PUSH_DEPTH, docstring)
+    return wp.vec4(soft[0] * (soft[1] / soft[2]) / a2, a2 * a3, a3, NO_PUSH_DEPTH)
 
 
 @wp.func
