@@ -67,6 +67,23 @@ def window_floor(h: float, gap_scale: float) -> float:
 
 
 @wp.func
+def closable_gap(point_vel: wp.vec3, normal: wp.vec3, reach_speed: float, floor: float, speculative_margin: float,
+                 h: float, gravity_length: float) -> float:
+    """The gap a slot's point can close within h (terrain_contact.py: its window), its approach
+    speed at least the box's reach speed and the floor."""
+    approach = wp.max(wp.max(wp.max(-wp.dot(point_vel, normal), 0.0), reach_speed), floor)
+    return speculative_margin + h * approach + h * h * gravity_length
+
+
+@wp.func
+def close_slot(contacts: TerrainContacts, slot: int):
+    """An idle slot holds no impulse to warm-start from."""
+    contacts.terrain_contact_active[slot] = 0
+    contacts.terrain_contact_normal_impulse[slot] = 0.0
+    contacts.terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+
+
+@wp.func
 def carry_still_contacts(
     start: int,
     count: int,
@@ -95,13 +112,10 @@ def carry_still_contacts(
             point = x + rot * checkpoint_local[slot]
         depth = contacts.terrain_contact_depth[slot] - wp.dot(normal, point - contacts.terrain_contact_point[slot])
         point_vel = v + wp.cross(omega, point - x)
-        approach = wp.max(wp.max(wp.max(-wp.dot(point_vel, normal), 0.0), reach_speed), floor)
-        if depth > -(speculative_margin + h * approach + h * h * gravity_length):
+        if depth > -closable_gap(point_vel, normal, reach_speed, floor, speculative_margin, h, gravity_length):
             active += 1
             contacts.terrain_contact_point[slot] = point
             contacts.terrain_contact_depth[slot] = depth
         else:
-            contacts.terrain_contact_active[slot] = 0
-            contacts.terrain_contact_normal_impulse[slot] = 0.0
-            contacts.terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+            close_slot(contacts, slot)
     return active

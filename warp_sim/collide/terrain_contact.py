@@ -79,7 +79,8 @@ from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSam
 from ..types import SHAPE_SPHERE
 from .closest_jet import jet_step
 from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
-from .still_contacts import NO_ANCHOR, STILL_SPEED, STILL_TRAVEL, carry_still_contacts, travel_since, window_floor
+from .still_contacts import (NO_ANCHOR, STILL_SPEED, STILL_TRAVEL, carry_still_contacts, closable_gap, close_slot,
+                             travel_since, window_floor)
 from .struck_reach import reachable_speed
 
 # No kernel here is differentiated: skip generating (and compiling) the adjoints.
@@ -527,8 +528,7 @@ def collide_terrain(
                             depth = (s.height - point[1]) * normal[1]
 
         point_vel = v + wp.cross(omega, point - x)
-        approach = wp.max(wp.max(wp.max(-wp.dot(point_vel, normal), 0.0), reach_speed), floor)
-        gap_closable = speculative_margin + h * approach + h * h * gravity_length
+        gap_closable = closable_gap(point_vel, normal, reach_speed, floor, speculative_margin, h, gravity_length)
         # a refreshed sphere keeps its slot whatever the gap: the step's pass opened it for the
         # whole step, and closing it here would hide the surface from the later substeps
         if depth > -gap_closable or refresh_spheres != 0:
@@ -542,9 +542,7 @@ def collide_terrain(
             contacts.terrain_contact_normal[slot] = normal
             contacts.terrain_contact_depth[slot] = depth
         else:
-            contacts.terrain_contact_active[slot] = 0
-            contacts.terrain_contact_normal_impulse[slot] = 0.0
-            contacts.terrain_contact_tangent_impulse[slot] = wp.vec3(0.0)
+            close_slot(contacts, slot)
     contacts.terrain_contact_count[body] = active
     if still_contacts != 0:
         # the pose these slots were found at; none where they were found mid-step or for a body
