@@ -389,6 +389,8 @@ def collide_terrain(
     face = wp.vec2i(0, 0)
     half = model.body_size[body]
     cell = wp.vec3(0.0)
+    if fourier_box:
+        cell = model.body_checkpoint_cell[body]  # a sphere's thread does not read it
     reach_speed = float(0.0)  # a box's points: the fastest a contact event could make them (struck_reach.py)
     if dynamic and not is_sphere:
         reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
@@ -402,7 +404,6 @@ def collide_terrain(
             quiet = wp.length(v)
             if not is_sphere:
                 reach = wp.length(half)
-                cell = model.body_checkpoint_cell[body]
                 quiet = wp.max(reach_speed, quiet + spin * reach) + spin * (cell[0] + cell[1] + cell[2])
             travel = travel_since(x, state_in.body_quat[body], contacts.terrain_contact_anchor_pos[body],
                                   contacts.terrain_contact_anchor_quat[body], reach)
@@ -412,7 +413,6 @@ def collide_terrain(
                     speculative_margin, floor, model.checkpoint_local, contacts)
                 return
     if fourier_box:
-        cell = model.body_checkpoint_cell[body]  # a sphere's thread does not read it
         center = fourier_sample(terrain.terrain_coef, terrain.terrain_terms, terrain.terrain_frequency,
                                 terrain.terrain_scale, terrain.terrain_offset,
                                 x[0], x[2])
