@@ -3,6 +3,7 @@
 import hashlib
 
 import numpy as np
+import pytest
 
 from warp_sim import FourierTerrain, cases
 
@@ -62,3 +63,24 @@ def test_the_colour_schedule_gives_the_same_state_on_any_cpu_thread_count(monkey
                     pytest.fail(f"largest colour {int(np.diff(starts).max())} pairs, not over {PAIR_CHUNK}")
             digests.append(state_digest(sim))
         assert digests[0] == digests[1] == digests[2], e
+
+
+@pytest.mark.parametrize("substeps, graph", [(1, False), (3, False), (1, True)])
+def test_a_terrain_only_step_run_in_place_equals_the_double_buffered_one(substeps, graph, monkeypatch):
+    """Without pairs the first of an odd number of substeps writes the buffer it reads
+    (solvers/solver.py fused_in_place) instead of copying the result back after the step: the
+    same bytes as the double-buffered step, and the state stays in the buffer it started in (a
+    caller holding ``sim.state`` sees every step, captured or not)."""
+    def run(in_place: bool):
+        sim = cases.terrain_drop(40, "mix", terrain=FourierTerrain(amplitude=0.4), rolling_resistance=0.1, dt=1 / 60,
+                                 substeps=substeps, graph=graph)
+        assert sim.substeps == substeps
+        monkeypatch.setattr(sim.solver, "fused_in_place", in_place)
+        held = sim.state
+        sim.step(1)
+        for _ in range(8):
+            sim.step(10)
+            assert sim.state is held
+        return state_digest(sim)
+
+    assert run(True) == run(False)

@@ -68,8 +68,13 @@ def test_pair_contact_steps_have_no_races(schedule, capturable, top_mass, overla
         assert check.checked.get(kernel, 0) > 0, kernel
 
 
-def test_terrain_only_fused_step_has_no_races():
-    sim = cases.terrain_drop(4, "mix", terrain=FourierTerrain(amplitude=0.3), spacing=0.6)
+@pytest.mark.parametrize("substeps", [4, 1, 3])
+def test_terrain_only_fused_step_has_no_races(substeps):
+    """With an odd substep count the first fused substep reads and writes one state buffer
+    (Simulator, solvers/solver.py fused_in_place): no thread may read another body's state."""
+    sim = cases.terrain_drop(4, "mix", terrain=FourierTerrain(amplitude=0.3), spacing=0.6, dt=1 / 60,
+                             substeps=substeps)
+    assert sim.substeps == substeps
     sim.step()
     with RaceCheck() as check:
         sim.step(2)

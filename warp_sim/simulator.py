@@ -7,6 +7,7 @@ and ``substep_plan`` say what runs and why).  With ``contact_update = "substep"`
 
     collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
+    (without pairs, the first of an odd number of substeps runs in place: solvers/solver.py)
 
 With ``"step"`` (the default, Box2D v3's soft step) the collision stages run once, at the start
 of the step, with speculative margins widened to cover the whole step (and, after the pairs,
@@ -207,24 +208,18 @@ class Simulator:
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
-        launch(
-            collide_terrain,
-            dim=m.body_count,
-            key=contacts,
-            inputs=[
-                # Model
-                bind(BodyModel, m, m), bind(TerrainModel, m, m),
-                # Settings
-                h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-                int(refresh_spheres), int(struck_only), int(self.config.face_search), int(self.closest_jet),
-                int(carry_still and self.config.still_contacts),
-                # State in, Solver in, In
-                bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
-                # Contacts
-                bind(TerrainContacts, contacts, contacts),
-            ],
-            device=self.device,
-        )
+        launch(collide_terrain, dim=m.body_count, key=contacts, inputs=[
+            # Model
+            bind(BodyModel, m, m), bind(TerrainModel, m, m),
+            # Settings
+            h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
+            int(refresh_spheres), int(struck_only), int(self.config.face_search), int(self.closest_jet),
+            int(carry_still and self.config.still_contacts),
+            # State in, Solver in, In
+            bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
+            # Contacts
+            bind(TerrainContacts, contacts, contacts),
+        ], device=self.device)
 
     def _stage(self, name: str, fn, *args):
         """Run one stage; with ``profile`` set, synchronise and add its wall time to stage_times."""
@@ -347,23 +342,26 @@ class Simulator:
             self._stage("sleep", self.sleep.wake_touched, self.contacts, collide)
         return self._color_sizes if self.pairs is not None else None
 
-    def _keep_output_buffer(self):
-        if self.substeps % 2 == 1:
+    def _keep_output_buffer(self, in_place: bool = False):
+        if self.substeps % 2 == 1 and not in_place:
             # Keep the captured graph's output in the buffer it started from.
             self.states[1].assign(self.states[0])
             self.states[0], self.states[1] = self.states[1], self.states[0]
 
     def _simulate_one_step_collide_each_substep(self):
         h = self.substep_dt
-        for _ in range(self.substeps):
+        in_place = self.pairs is None and self.substeps % 2 == 1 and self.solver.fused_in_place  # solver.py
+        for k in range(self.substeps):
             color_sizes = self._collide_pass(h, self.config.speculative_margin, h)
             domains = self.pairs.domain_schedule() if self.pairs is not None else None
-            self._stage("solve", self.solver.step, self.physics_model, self.states[0], self.states[1], self.contacts,
+            out = self.states[0] if in_place and k == 0 else self.states[1]
+            self._stage("solve", self.solver.step, self.physics_model, self.states[0], out, self.contacts,
                         h, self.body_bad_step, self.bad_count, color_sizes, True, domains)
             if self.pairs is not None:
                 self._stage("solve", self.pairs.store, self.contacts)
-            self.states[0], self.states[1] = self.states[1], self.states[0]
-        self._keep_output_buffer()
+            if out is self.states[1]:
+                self.states[0], self.states[1] = self.states[1], self.states[0]
+        self._keep_output_buffer(in_place)
 
     def _collide_pairs(self, margin: float, sweep_time: float, state=None, moved=None):
         """The pair pipeline on states[0] (or on ``state``, with ``moved``: a mid-step pass, see

@@ -74,6 +74,11 @@ class SoftStepSolver:
     # Each body's list of active terrain slots is built once per collision pass (staged.prepare_body);
     # tests turn this off to check that rebuilding it every substep changes nothing.
     reuse_terrain_rows = True
+    # Without pairs a substep is the fused launch, in which body i reads and writes body i's state
+    # alone (soft_step.solve_and_integrate): it may run in place, and the Simulator runs the first
+    # of an odd number of substeps so, instead of copying the step's result back into the buffer
+    # it started from (5 arrays, 88 bytes a body-step)
+    fused_in_place = True
 
     def __init__(self, settings: SolverSettings, gravity, device, body_count: int = 0):
         self.settings = settings
@@ -550,6 +555,8 @@ class PushoutSolver(SoftStepSolver):
     """The thesis's contact response (SEED.md 3, pushout.py), kept as the baseline the soft step
     is measured against.  It shares the soft step's per-body stages (prepare, integrate,
     finalize) and arrays, and replaces the substep."""
+
+    fused_in_place = False  # its push-out passes read other bodies' output positions
 
     def step(self, model, state_in, state_out, contacts, dt: float, body_bad_step, bad_count, color_sizes=None,
              fresh_contacts: bool = True, domains=None, rebuild_rows: bool = False, after_impacts=None):
