@@ -191,3 +191,20 @@ def test_line_profile_says_which_tool_is_missing(monkeypatch, capsys):
     monkeypatch.setattr(line_profile.shutil, "which", lambda tool: None if tool == "perf" else "/usr/bin/" + tool)
     assert line_profile.main(["--count", "10", "--steps", "1"]) == 2
     assert "perf" in capsys.readouterr().err
+
+
+def test_handoff_times_the_same_kernel_whole_and_split(tmp_path, monkeypatch):
+    """bench/handoff.py writes one row per kernel size, the split and whole launches timed, and
+    refuses to run where there is no second thread to hand a chunk to."""
+    import json
+
+    from bench import handoff
+
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "2")
+    handoff.main(["--works", "10", "200", "--repeats", "3", "--out-dir", str(tmp_path)])
+    rows = json.loads((tmp_path / "handoff.json").read_text())["rows"]
+    assert [row["work"] for row in rows] == [10, 200]
+    assert all(row["whole_us"] > 0.0 and row["split_us"] > 0.0 for row in rows)
+    monkeypatch.setenv("WARP_SIM_CPU_THREADS", "1")
+    with pytest.raises(SystemExit, match="one CPU thread"):
+        handoff.main(["--out-dir", str(tmp_path)])
