@@ -39,3 +39,6 @@ def pytest_generate_tests(metafunc):
 
 
 os.environ.setdefault("WARP_SIM_TEST", "1")
+# no spinning workers (launch.hot): two test processes on two cores would each spin a core away
+# from the other; tests/test_hot_launch.py turns them on where it checks them
+os.environ.setdefault("WARP_SIM_HOT", "0")

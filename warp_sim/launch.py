@@ -22,7 +22,8 @@ bench/results/gpu_h200*.json).  During a CPU graph capture
 (Warp records the launches for replay, ``wp.ScopedCapture(device="cpu")``) it is one launch too,
 recorded in order on the calling thread.  ``race_check.RaceCheck`` replaces every launch made
 through here with checked ones (chunk orders shuffled and reversed, each thread run alone).
-``WARP_SIM_CPU_THREADS`` overrides the thread count (default: all cores).
+``WARP_SIM_CPU_THREADS`` overrides the thread count (default: all cores).  While a simulator runs
+its steps the extra threads wait for their chunks spinning instead of sleeping (``hot``, below).
 
 Packing 20-30 kernel arguments costs ~30 us per ``wp.launch`` in Python, more than a small
 kernel runs.  A call site that passes ``key`` keeps recorded launch commands (one per chunk) and
@@ -34,6 +35,7 @@ contact buffer); the commands are dropped with it.
 from __future__ import annotations
 
 import os
+import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 
@@ -53,6 +55,7 @@ _pool: ThreadPoolExecutor | None = None
 _warm: set = set()
 _recorded: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # owner -> {(kernel, device): _Recorded}
 _checker = None  # a race_check.RaceCheck while one is active
+_hot = None  # a _HotWorkers while hot() is active
 
 
 def set_checker(checker) -> None:
@@ -135,6 +138,9 @@ def launch(kernel, dim: int, inputs: list, device, key=None, min_chunk: int = MI
         fn, args, kwargs = jobs[0]
         fn(*args, **kwargs)
         return
+    if _hot is not None and _hot.width >= chunks and _hot_owner == threading.get_ident():
+        _hot.run(jobs)
+        return
     # the calling thread runs the first chunk itself: one hand-off fewer per launch
     pool = _executor(threads)
     futures = [pool.submit(fn, *args, **kwargs) for fn, args, kwargs in jobs[1:]]
@@ -168,3 +174,151 @@ def _commands(key, kernel, inputs: list, device, chunks: int, blocks: dict) -> l
                 cmd.set_param_at_index(index + 1, new)
             entry.inputs[index] = new
     return entry.commands
+
+
+# Hot workers ---------------------------------------------------------------------------------
+# A pool thread waiting for its next chunk sleeps in the kernel, and waking it costs more than the
+# Python it runs: on a virtual machine whose idle CPUs halt at once, the CPU must be woken too,
+# and the scheduler may start the woken thread on the launching thread's CPU, where the two
+# chunks then share one core (bench/handoff.py measures the hand-off either way).  During a run
+# of steps (Simulator._run_steps enters ``hot``) each extra thread instead waits for its next
+# chunk in pthread_spin_lock: a C call that holds no GIL, so the launching thread runs Python
+# freely while it spins.  The chunks, their order and their results are those of the pool (each
+# chunk is a whole launch of its own index range); between runs the threads are parked on an
+# Event and use no CPU.  Only the thread that entered ``hot`` hands chunks to them.  Off where
+# libc has no pthread spinlocks, with ``WARP_SIM_HOT=0`` (the tests set it: two test processes
+# on two cores would each spin a core away from the other), and with one CPU thread.
+
+
+def _spin_library():
+    """libc's pthread spinlock calls, or None where there are none (not glibc)."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None)
+        calls = {name: getattr(libc, "pthread_spin_" + name) for name in ("init", "lock", "unlock", "trylock")}
+    except (OSError, AttributeError):
+        return None
+    for name, call in calls.items():
+        call.argtypes = [ctypes.POINTER(ctypes.c_int)] + ([ctypes.c_int] if name == "init" else [])
+        call.restype = ctypes.c_int
+    return calls
+
+
+_PARK = object()
+
+
+class _HotWorker:
+    """One spinning thread: ``go`` unlocked hands it a job (or _PARK), ``done`` unlocked says the
+    job ran; both are locked while nothing is pending."""
+
+    def __init__(self, spin):
+        import ctypes
+        import threading
+
+        self.spin = spin
+        self.locks = (ctypes.c_int(), ctypes.c_int())
+        self.go, self.done = (ctypes.byref(lock) for lock in self.locks)
+        for lock in (self.go, self.done):
+            spin["init"](lock, 0)
+            spin["lock"](lock)
+        self.job = None
+        self.error = None
+        self.wake = threading.Event()
+        self.parked = threading.Event()
+        threading.Thread(target=self._loop, name="warp_sim_hot", daemon=True).start()
+
+    def _loop(self):
+        while True:
+            self.wake.wait()
+            self.wake.clear()
+            while True:
+                self.spin["lock"](self.go)
+                job = self.job
+                if job is _PARK:
+                    break
+                try:
+                    fn, args, kwargs = job
+                    fn(*args, **kwargs)
+                except BaseException as error:  # noqa: BLE001 - raised again on the launching thread
+                    self.error = error
+                self.spin["unlock"](self.done)
+            self.parked.set()
+
+    def start(self, job):
+        self.job = job
+        self.spin["unlock"](self.go)
+
+    def finish(self):
+        self.spin["lock"](self.done)
+        error, self.error = self.error, None
+        if error is not None:
+            raise error
+
+    def park(self):
+        self.job = _PARK
+        self.spin["unlock"](self.go)
+        self.parked.wait()
+        self.parked.clear()
+        self.spin["trylock"](self.done)  # locked again, whether or not an interrupted launch took its signal
+
+
+class _HotWorkers:
+    def __init__(self, width: int, spin):
+        self.width = width
+        self.pid = os.getpid()  # threads do not survive a fork: a child makes its own
+        self.workers = [_HotWorker(spin) for _ in range(width - 1)]
+
+    def run(self, jobs):
+        started = []
+        try:
+            for worker, job in zip(self.workers, jobs[1:]):
+                worker.start(job)
+                started.append(worker)
+            fn, args, kwargs = jobs[0]
+            fn(*args, **kwargs)
+        finally:
+            for worker in started:
+                worker.finish()
+
+
+_hot_pool: _HotWorkers | None = None
+_hot_owner: int | None = None  # the thread whose launches use _hot
+_hot_depth = 0
+
+
+class hot:
+    """While active, the calling thread's split launches hand their chunks to spinning workers
+    (the section comment); nests, and is a no-op on other threads meanwhile."""
+
+    def __enter__(self):
+        global _hot, _hot_pool, _hot_owner, _hot_depth
+        me = threading.get_ident()
+        if _hot_owner not in (None, me):
+            return self
+        _hot_owner = me
+        _hot_depth += 1
+        threads = cpu_threads()
+        if _hot_depth == 1 and os.environ.get("WARP_SIM_HOT", "1") != "0" and threads > 1:
+            if _hot_pool is None or _hot_pool.width != threads or _hot_pool.pid != os.getpid():
+                spin = _spin_library()
+                _hot_pool = _HotWorkers(threads, spin) if spin is not None else None
+            if _hot_pool is not None:
+                for worker in _hot_pool.workers:
+                    worker.wake.set()
+                _hot = _hot_pool
+        return self
+
+    def __exit__(self, *exc):
+        global _hot, _hot_owner, _hot_depth
+        if _hot_owner != threading.get_ident():
+            return False
+        _hot_depth -= 1
+        if _hot_depth == 0:
+            _hot_owner = None
+            if _hot is not None:
+                _hot = None
+                for worker in _hot_pool.workers:
+                    worker.park()
+        return False
+
