@@ -355,6 +355,8 @@ def collide_terrain(
     ``struck_only``: after the pairs of a pass, only the boxes whose reach a partner widened
     (struck_reach.py, ``body_struck_reach``), their slots found again at the same pose with it."""
     body = wp.tid() + tid_offset
+    if struck_only != 0 and body_struck_reach[body] <= 0.0:
+        return  # no partner widened its reach (most bodies of a pass: struck_reach raises only a few)
     if refresh_spheres != 0:
         # only spheres touching the terrain since the step's pass, and only once they have moved:
         # a sphere whose slot the pass left idle cannot reach the surface within the step (the
@@ -395,6 +397,11 @@ def collide_terrain(
     if dynamic and not is_sphere:
         reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
                                       model.body_inv_inertia[body], model.body_inv_mass[body], half)
+    if struck_only != 0:
+        # before any terrain sample
+        if not dynamic or is_sphere or body_struck_reach[body] <= reach_speed:
+            return
+        reach_speed = body_struck_reach[body]
     floor = float(0.0)  # the windows' least approach speed while still bodies are carried (still_contacts.py)
     if still_contacts != 0 and terrain.terrain_kind == TERRAIN_FOURIER:
         floor = window_floor(h, gap_scale)
@@ -419,10 +426,6 @@ def collide_terrain(
         # the support face's checkpoints climb to the crests within their cells (face_search.py)
         face = support_face(rot, -fourier_normal(center.grad))
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
-    if struck_only != 0:
-        if not dynamic or is_sphere or body_struck_reach[body] <= reach_speed:
-            return
-        reach_speed = body_struck_reach[body]
 
     active = int(0)
     for slot in range(start, start + count):
