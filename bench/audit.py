@@ -8,9 +8,13 @@ is 0 whatever the verdicts (2 for bad arguments).
     python bench/audit.py --quick              # one or two variants each, shorter runs (< ~60 s warm)
     python bench/audit.py --case impact_friction --quick
     python bench/audit.py --list
+    python bench/audit.py --set iterations=1 --out-dir /tmp/a   # the same cases under a faster choice
 
 Output: bench/results/audit.csv and .json, or with --quick a new temporary folder (so a quick
-look never overwrites the recorded run); --out-dir chooses.  Cases (item of the issue):
+look never overwrites the recorded run); --out-dir chooses.  ``--set FIELD=VALUE`` (repeatable)
+gives every simulator the cases build that SimConfig value wherever the case leaves the field at
+its default (a case that sets the field itself keeps its own): the accuracy a faster choice costs,
+measured on the same families; its verdicts are that choice's, not the defaults'.  Cases (item of the issue):
 
     sleep_hit (1)              ball hits a sleeping ball (mass ratios, e); ball on a sleeping stack
     multipoint_restitution (2) flat cube bounce (apex e^2 H, no spin); face-on cubes; row of balls
@@ -31,6 +35,7 @@ look never overwrites the recorded run); --out-dir chooses.  Cases (item of the 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 import time
@@ -81,6 +86,41 @@ def print_table(rows: list[dict]):
         print("  ".join(x.ljust(w) for x, w in zip(c, widths)))
 
 
+def parse_settings(pairs: list[str]) -> dict:
+    """``FIELD=VALUE`` strings (VALUE as JSON: 1, 0.5, true, "points") as a dict of SimConfig fields;
+    ValueError naming the pair that is not one."""
+    from warp_sim import SimConfig
+
+    settings = {}
+    for pair in pairs:
+        field, sep, text = pair.partition("=")
+        if not sep or field not in SimConfig.__dataclass_fields__:
+            raise ValueError(f"--set takes FIELD=VALUE with FIELD a SimConfig field, got {pair!r}")
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            value = text  # a bare word: a string setting
+        setattr(SimConfig(), field, value)  # SimConfig's own check, naming the field and the value
+        settings[field] = value
+    return settings
+
+
+def apply_settings(settings: dict) -> None:
+    """Every Simulator made from now on takes ``settings`` where its config holds the default."""
+    from warp_sim import SimConfig, simulator
+
+    defaults = SimConfig()
+    plain_init = simulator.Simulator.__init__
+
+    def init(self, model, config):
+        for field, value in settings.items():
+            if getattr(config, field) == getattr(defaults, field):
+                setattr(config, field, value)
+        plain_init(self, model, config)
+
+    simulator.Simulator.__init__ = init
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -90,7 +130,14 @@ def main(argv=None) -> int:
     p.add_argument("--out-dir", type=Path, default=None,
                    help="where audit.csv/.json go (default bench/results; with --quick a temporary folder)")
     p.add_argument("--list", action="store_true", help="list the case names and exit")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="a SimConfig value for every case that leaves the field at its default (repeatable)")
     args = p.parse_args(argv)
+    try:
+        settings = parse_settings(args.set)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     if args.list:
         print("\n".join(CASES))
         return 0
@@ -105,6 +152,8 @@ def main(argv=None) -> int:
 
     wp.config.quiet = True
     wp.init()
+    if settings:
+        apply_settings(settings)
     rows = []
     start = time.perf_counter()
     for name in names:
@@ -121,7 +170,7 @@ def main(argv=None) -> int:
     total = time.perf_counter() - start
     print(f"\n{len(rows) - failed} PASS, {failed} FAIL of {len(rows)} checks in {total:.0f} s"
           + (" (quick)" if args.quick else ""))
-    meta = {**machine_info("cpu"), "quick": args.quick, "cases": names, "wall_s": round(total, 1)}
+    meta = {**machine_info("cpu"), "quick": args.quick, "cases": names, "wall_s": round(total, 1), "settings": settings}
     csv_path, json_path = write_rows("audit", rows, meta, out_dir)
     print(f"wrote {csv_path} and {json_path}")
     return 0

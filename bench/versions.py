@@ -56,6 +56,9 @@ VARIANTS = {
     "checkpoints only": {"face_search": False},
     # every body's terrain contacts searched every pass, still ones too (collide/still_contacts.py)
     "search every pass": {"still_contacts": False},
+    # one solve sweep a substep instead of two (Box2D v3's count; its accuracy: audit.py --set iterations=1)
+    "iterations 1": {"iterations": 1},
+    "iterations 1, relax_passes 1": {"iterations": 1, "relax_passes": 1},
 }
 
 # Per-stage split.  This host's speed swings by up to 2x over minutes (other tenants), so one

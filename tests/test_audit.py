@@ -42,3 +42,22 @@ def test_unknown_case_is_a_one_line_error(tmp_path):
     assert out.returncode == 2
     assert "error: --case must be one of" in out.stderr and "'no_such_case'" in out.stderr
     assert not (tmp_path / "audit.csv").exists()
+
+
+def test_set_gives_every_case_a_setting_it_leaves_at_the_default(monkeypatch):
+    """--set FIELD=VALUE: the value reaches simulators whose config holds the default, a case's
+    own choice is kept, and a bad pair is one error line naming it."""
+    sys.path.insert(0, str(ROOT))
+    from bench import audit
+    from warp_sim import SimConfig, cases, simulator
+
+    assert audit.parse_settings(["iterations=1", "face_friction=points"]) == {"iterations": 1,
+                                                                             "face_friction": "points"}
+    monkeypatch.setattr(simulator.Simulator, "__init__", simulator.Simulator.__init__)  # undone after the test
+    audit.apply_settings({"iterations": 1})
+    assert cases.terrain_drop(2, "sphere").config.iterations == 1
+    assert cases.terrain_drop(2, "sphere", iterations=3).config.iterations == 3
+    assert SimConfig().iterations == 2
+    for bad in ("iterations", "no_field=1", "iterations=0"):
+        out = run_audit("--set", bad)
+        assert out.returncode == 2 and out.stderr.startswith("error:") and len(out.stderr.strip().splitlines()) == 1
