@@ -197,7 +197,7 @@ def _spin_library():
     try:
         libc = ctypes.CDLL(None)
         calls = {name: getattr(libc, "pthread_spin_" + name) for name in ("init", "lock", "unlock", "trylock")}
-    except (OSError, AttributeError):
+    except (OSError, AttributeError, TypeError):  # no libc to load (Windows), or no spinlocks in it (macOS)
         return None
     for name, call in calls.items():
         call.argtypes = [ctypes.POINTER(ctypes.c_int)] + ([ctypes.c_int] if name == "init" else [])
