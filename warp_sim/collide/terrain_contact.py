@@ -398,8 +398,9 @@ def collide_terrain(
         reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
                                       model.body_inv_inertia[body], model.body_inv_mass[body], half)
     if struck_only != 0:
-        # before any terrain sample
-        if not dynamic or is_sphere or body_struck_reach[body] <= reach_speed:
+        # before any terrain sample; a body past the test at the top is a dynamic box (struck_reach
+        # raises only bodies with a compliance, and a sphere's or a static body's is 0)
+        if body_struck_reach[body] <= reach_speed:
             return
         reach_speed = body_struck_reach[body]
     floor = float(0.0)  # the windows' least approach speed while still bodies are carried (still_contacts.py)
