@@ -29,9 +29,11 @@ def stack(count: int, top_down: bool = False, device="cpu", **config) -> Simulat
     return Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=4, device=device, **config))
 
 
-@pytest.mark.parametrize("schedule,top_down,impacts", [("domains", False, "auto"), ("domains", True, "auto"),
-                                                       ("colors", False, "auto"), ("domains", False, "always")])
-def test_stack_of_ten_unit_boxes_stands_for_ten_seconds(schedule, top_down, impacts, device):
+@pytest.mark.parametrize("schedule,top_down,impacts,iterations", [
+    ("domains", False, "auto", 2), ("domains", True, "auto", 2), ("colors", False, "auto", 2),
+    ("domains", False, "always", 2), ("domains", False, "auto", 1), ("domains", True, "auto", 1),
+    ("colors", False, "auto", 1), ("domains", False, "always", 1)])
+def test_stack_of_ten_unit_boxes_stands_for_ten_seconds(schedule, top_down, impacts, iterations, device):
     """The soft contact is a spring: a point of effective mass m_eff = 1/k_n under load W sags
     W / (m_eff omega^2).  Unit cubes: a face has 4 points, k_n = 4 against the ground and 8
     between two boxes, so the column sags 10 g/w^2 + sum_k 2 (10 - k) g/w^2 = 100 g / omega^2
@@ -39,10 +41,12 @@ def test_stack_of_ten_unit_boxes_stands_for_ten_seconds(schedule, top_down, impa
     box must move less than 1 cm over the remaining 9 s.  Both pair schedules; the slab sweep
     walks the bodies in order, so the stack is also built with its body order reversed.  And with
     the impact stage run in this inelastic scene (``impacts = "always"``), whose relax then holds
-    closed contacts only: resting contacts must not take part in it."""
+    closed contacts only: resting contacts must not take part in it.  With one solve sweep a
+    substep too (``iterations = 1``, the faster choice): a sweep that walked forward, the terrain
+    rows first, let the column drift 2 to 5 cm sideways, so the last sweep walks backwards (plan.py)."""
     if schedule == "domains" and device != "cpu":
         pytest.skip("the slab schedule runs on the CPU only")
-    sim = stack(10, top_down, device, pair_schedule=schedule, impacts=impacts)
+    sim = stack(10, top_down, device, pair_schedule=schedule, impacts=impacts, iterations=iterations)
     top = 0 if top_down else -1
     top0 = sim.state.body_pos.numpy()[top].copy()
     sim.step(60)
@@ -52,9 +56,11 @@ def test_stack_of_ten_unit_boxes_stands_for_ten_seconds(schedule, top_down, impa
     assert np.linalg.norm(sim.state.body_pos.numpy()[top] - settled) < 0.01
 
 
+@pytest.mark.parametrize("iterations", [2, 1])
 @pytest.mark.parametrize("schedule", ["domains", "colors"])
-def test_pyramid_of_base_ten_stands(schedule, device):
-    """55 boxes in a 2-D pyramid: after settling (1 s) no box moves more than 1 cm in 4 s."""
+def test_pyramid_of_base_ten_stands(schedule, iterations, device):
+    """55 boxes in a 2-D pyramid: after settling (1 s) no box moves more than 1 cm in 4 s, with
+    the default two solve sweeps a substep and with one."""
     if schedule == "domains" and device != "cpu":
         pytest.skip("the slab schedule runs on the CPU only")
     b = ModelBuilder(Material(friction=0.6))
@@ -63,11 +69,35 @@ def test_pyramid_of_base_ten_stands(schedule, device):
         for k in range(10 - row):
             b.add_box((0.5, 0.5, 0.5), 1.0, position=(k - (9 - row) / 2.0, 0.5 + row, 0.0))
     sim = Simulator(b.finalize(device), SimConfig(dt=1 / 60, substeps=4, sleep=False, pair_schedule=schedule,
-                                                  device=device))
+                                                  iterations=iterations, device=device))
     sim.step(60)
     settled = sim.state.body_pos.numpy().copy()
     sim.step(240)
     assert np.abs(sim.state.body_pos.numpy() - settled).max() < 0.01
+
+
+@pytest.mark.parametrize("iterations", [2, pytest.param(1, marks=pytest.mark.xfail(strict=True, reason=(
+    "one solve sweep: a speculative pair row solved against a warm-started velocity keeps its impulse")))])
+@pytest.mark.parametrize("speed", [3e4, 1e5])
+def test_a_box_behind_a_ball_striking_a_row_is_left_alone(speed, iterations, device):
+    """A ball at tens of km/s strikes a row of three balls 5 m apart, and a box 5 m behind it
+    shares the ball's candidate pairs (its swept reach covers the box).  Nothing moves toward
+    the box, so it must only settle on the plane: g dt^2 ~ 3 mm in y at most, and no sideways
+    motion beyond float rounding.  The faster choice ``iterations = 1`` fails here, shown: in
+    the substep after the strike the warm start hands the ball its carried impulses first, which
+    turns it toward the box for the moment, and the speculative row of the ball and the box,
+    walked first, closes its gap against that velocity; the sweep that would take the impulse back
+    never comes before the positions move (the box was thrown 12.8 m at 30 km/s)."""
+    b = ModelBuilder()
+    b.set_terrain(PlaneTerrain())
+    b.add_sphere(0.25, 1.0, position=(0.0, 0.25, 0.0), velocity=(speed, 0.0, 0.0))
+    for k in range(1, 4):
+        b.add_sphere(0.25, 1.0, position=(5.0 * k, 0.25, 0.0))
+    box = b.add_box((0.25, 0.25, 0.25), 1.0, position=(-5.0, 0.25, 0.0))
+    sim = Simulator(b.finalize(device), SimConfig(body_contact=True, iterations=iterations, device=device))
+    sim.step(1)
+    pos = sim.state.body_pos.numpy()[box]
+    assert abs(pos[0] + 5.0) < 1e-3 and abs(pos[2]) < 1e-3 and abs(pos[1] - 0.25) < 5e-3
 
 
 def test_row_of_spheres_settles_in_a_pit(device):

@@ -77,7 +77,10 @@ def substep_plan(iterations: int, relax_iterations: int, impacts: bool, joint: b
         plan.append(Stage(IMPACT_TRAVEL, TRAVEL_ROUND, mode=MODE_IMPACT))
         plan.append(Stage(AFTER_IMPACTS))
     plan += [Stage(PREPARE), Stage(WARM_START)]
-    plan += [Stage(SOLVE, k, iterations, MODE_SOLVE, use_bias=1, reverse=k % 2) for k in range(iterations)]
+    # the sweeps alternate direction and the last one walks backwards, ending on the terrain rows
+    # (SoftStepSolver._step_domains gives the measurements)
+    plan += [Stage(SOLVE, k, iterations, MODE_SOLVE, use_bias=1, reverse=(k + iterations) % 2)
+             for k in range(iterations)]
     plan.append(Stage(INTEGRATE))
     # relax: open gaps of a scene with restitution are left to the next substep's impact stage
     relax_mode, relax_bias = (MODE_RELAX_CLOSED, -1) if impacts else (MODE_RELAX, 0)
