@@ -428,6 +428,17 @@ def collide_terrain(
         face = support_face(rot, -fourier_normal(center.grad))
     slack = CULL_SLACK + CULL_SLACK_RATE * (wp.abs(x[0]) + wp.abs(x[2]))
 
+    # A sphere's window, measured in the tangent plane of its closest point, misses ground that curves up
+    # ahead: over a travel d the surface rises at most k d^2 / 2 above that plane (k the curvature
+    # bound).  A ball at 150 m/s crosses 2.5 m in the window of a once-a-step pass; on the shipped
+    # terrain the plane saw the ground 0.9 m off and closing too slowly to touch, the slot stayed idle,
+    # and the ball ended the step with its centre under the surface.  The refreshes between passes keep
+    # an open slot whatever its gap, so the window is widened only here.
+    curve_rise = float(0.0)
+    if is_sphere and dynamic and refresh_spheres == 0 and terrain.terrain_kind == TERRAIN_FOURIER:
+        travel = h * wp.length(v) + 0.5 * h * h * gravity_length
+        curve_rise = 0.5 * terrain.terrain_curvature_bound * travel * travel
+
     active = int(0)
     for slot in range(start, start + count):
         if refresh_spheres != 0 and contacts.terrain_contact_active[slot] == 0:
@@ -533,6 +544,7 @@ def collide_terrain(
 
         point_vel = v + wp.cross(omega, point - x)
         gap_closable = closable_gap(point_vel, normal, reach_speed, floor, speculative_margin, h, gravity_length)
+        gap_closable += curve_rise
         # a refreshed sphere keeps its slot whatever the gap: the step's pass opened it for the
         # whole step, and closing it here would hide the surface from the later substeps
         if depth > -gap_closable or refresh_spheres != 0:
