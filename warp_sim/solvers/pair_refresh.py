@@ -138,13 +138,11 @@ def refresh_turned_pairs(
     # leaves it behind on each by that body's share, while motion along n is the gap itself, which
     # the rows follow exactly.  Not counted, a 4 cm cube that had slid 12 cm along a free plate since
     # the pass was pushed at points outside its own face, spun at 380 rad/s and went through it
-    relative = (body_pos[i] - solver_ref_pos[i]) - (body_pos[j] - solver_ref_pos[j])
-    swing = float(0.0)
-    if body_inv_mass[i] == 0.0 or body_inv_mass[j] == 0.0 or sphere_i or sphere_j:
-        swing = wp.length(relative)
-    else:
+    slide = (body_pos[i] - solver_ref_pos[i]) - (body_pos[j] - solver_ref_pos[j])
+    if body_inv_mass[i] > 0.0 and body_inv_mass[j] > 0.0 and not sphere_i and not sphere_j:
         n = pair_normal[p]
-        swing = wp.length(relative - wp.dot(relative, n) * n)
+        slide = slide - wp.dot(slide, n) * n
+    swing = wp.length(slide)
     if not sphere_i:
         swing += turn_angle(body_rot[i], solver_ref_rot[i]) * body_bound_radius[i]
     if not sphere_j:
