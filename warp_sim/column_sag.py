@@ -91,6 +91,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .column_lean import LEAN_SAFETY, lean_terms
 from .types import SHAPE_SPHERE
 
 MAX_AUTO_SUBSTEPS = 64
@@ -124,7 +125,10 @@ class SubstepPlan:
     landing_speed: float = 0.0  # [m/s] the fastest landing on a pile the scene starts with
     landing_depth: float = 0.01  # SimConfig.landing_depth, or less for small bodies (plan_budgets) [m]
     landing_dt: float = 0.0  # the step dt the landing was planned for [s]
-    raised_by: str = ""  # "sag" or "landing": the budget the last substep added was for
+    raised_by: str = ""  # "sag", "landing" or "lean": the budget the last substep added was for
+    lean_margin: float = 0.0  # [m] the checked leaning column's margin that asks the most substeps (0: none)
+    lean_need_requested: float = 0.0  # [m] the margin it needs to stand at the requested substeps
+    lean_need: float = 0.0  # [m] ... at the substeps run (column_lean.py)
 
     def landing_transient(self, substeps: int | None = None) -> float:
         """The deepest transient of the fastest landing at ``substeps`` (default: the ones run) [m]."""
@@ -136,10 +140,16 @@ class SubstepPlan:
             return ""
         if self.raised_by == "sag":
             return f"a column would sag {self.sag_requested * 1000:.0f} mm"
+        if self.raised_by == "lean":
+            return (f"a column leaning {self.lean_margin * 1000:.0f} mm inside its support's edge needs "
+                    f"{self.lean_need_requested * 1000:.0f} mm to stand")
         return f"a landing on a pile would sink {self.landing_transient(self.requested) * 1000:.0f} mm"
 
     def describe(self) -> str:
         head = f"{self.substeps} substeps"
+        if self.lean_margin > 0.0:
+            head += (f" (leaning column: {self.lean_margin * 1000:.1f} mm inside its support's edge, "
+                     f"{self.lean_need * 1000:.1f} mm needed)")
         if self.column_bodies < 2:
             return head
         text = (f"{head}: tallest column {self.column_bodies} bodies, soft-contact sag "
@@ -154,7 +164,7 @@ class SubstepPlan:
         if self.substeps != self.requested and landing_requested > self.landing_depth:
             text += (f" (at the {self.requested} requested the landing transient is "
                      f"{landing_requested * 1000:.1f} mm, over the landing_depth budget)")
-        if self.sag > self.budget or self.landing_transient() > self.landing_depth:
+        if self.sag > self.budget or self.landing_transient() > self.landing_depth or self.lean_need > self.lean_margin:
             reason = "auto_substeps is off" if not self.auto else f"auto_substeps stops at {MAX_AUTO_SUBSTEPS}"
             text += f"; still over the budget: {reason}"
         return text
@@ -307,9 +317,36 @@ def plan_budgets(model, config) -> tuple[float, float]:
     return scale * float(config.column_sag), scale * float(config.landing_depth)
 
 
-def plan_substeps(model, config, state=None) -> SubstepPlan:
+def scene_lean(model, config, state=None) -> list:
+    """column_lean.lean_terms of the columns ``model`` starts with (or stands in ``state``): what
+    plan_substeps checks leaning columns against."""
+    g = float(np.linalg.norm(config.gravity))
+    host = model.host
+    if g == 0.0 or not config.body_contact or np.count_nonzero(host["body_inv_mass"] > 0) < 2:
+        return []
+    up = -np.asarray(config.gravity, dtype=np.float64) / g
+    pos, rot = (host["body_pos"], host["body_rot"]) if state is None else (state.body_pos.numpy(), state.body_rot.numpy())
+    terrain = getattr(model, "terrain", None)
+    height = getattr(terrain, "height", None) if up[1] > 1.0 - 1e-9 else None  # the ground is a height in y
+    return lean_terms(host, pos, rot, up, height)
+
+
+def lean_need(lean: list, g: float, omega: float) -> tuple[float, float]:
+    """The checked interface that asks the most of its margin at contact frequency ``omega``:
+    (its margin, the margin it needs) [m], or (0, 0) when there is none (column_lean.py)."""
+    best, margin, need = 0.0, 0.0, 0.0
+    for coefficient, offset, edge in lean:
+        needed = LEAN_SAFETY * math.sqrt(offset * coefficient * g) / omega
+        if needed / edge > best:  # a load over its support's centre (e = 0) needs nothing
+            best, margin, need = needed / edge, edge, needed
+    return margin, need
+
+
+def plan_substeps(model, config, state=None, lean=None) -> SubstepPlan:
     """The substeps to run for ``config`` on ``model``, its bodies posed as in ``state`` (default:
-    as the model places them)."""
+    as the model places them).  ``lean``: the scene's leaning columns (scene_lean) when already
+    known; the Simulator keeps those it was built with, so a setting changed later plans for them
+    too."""
     requested = int(config.substeps)
     g = float(np.linalg.norm(config.gravity))
     host = model.host
@@ -334,6 +371,12 @@ def plan_substeps(model, config, state=None) -> SubstepPlan:
     def sag(n: int) -> float:
         return g * terms / contact_omega(config.dt / n, config.contact_hertz) ** 2
 
+    if lean is None:
+        lean = scene_lean(model, config, state)
+
+    def leaning(n: int) -> tuple[float, float]:
+        return lean_need(lean, g, contact_omega(config.dt / n, config.contact_hertz))
+
     speed = math.sqrt(2.0 * g * fall)
     chosen, raised_by = requested, ""
     if config.auto_substeps:
@@ -342,8 +385,12 @@ def plan_substeps(model, config, state=None) -> SubstepPlan:
                 raised_by = "landing"
             elif sag(chosen) > sag_budget:
                 raised_by = "sag"
+            elif leaning(chosen)[1] > leaning(chosen)[0]:
+                raised_by = "lean"
             else:
                 break
             chosen += 1
+    margin, need_requested = leaning(requested)
     return SubstepPlan(requested, chosen, count, sag(requested), sag(chosen), sag_budget,
-                       bool(config.auto_substeps), speed, landing_budget, float(config.dt), raised_by)
+                       bool(config.auto_substeps), speed, landing_budget, float(config.dt), raised_by,
+                       margin, need_requested, leaning(chosen)[1])

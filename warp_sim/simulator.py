@@ -59,7 +59,7 @@ from .config import NonFiniteStateError, SimConfig  # noqa: F401 (SimConfig is i
 from .solvers.solver import SolverSettings, make_solver
 from .terrain import TERRAIN_NONE, FourierTerrain, PlaneTerrain
 from .types import SHAPE_BOX, SHAPE_SPHERE
-from .column_sag import plan_substeps
+from .column_sag import plan_substeps, scene_lean
 from .validation import CONTACT_UPDATES, PAIR_SCHEDULES, SIM_SCHEMA, SOLVERS, STEP_COUNT, check_fields  # noqa: F401
 from .validation import check as check_value
 
@@ -572,8 +572,9 @@ class Simulator:
         for key, value in changes.items():
             setattr(self.config, key, value)
         self.config.validate()
-        # between steps (the graph is captured again below): plan on the columns standing now
-        self.substep_plan = plan_substeps(self.model, self.config, self.state)
+        # between steps (the graph is captured again below): plan on the columns standing now, and
+        # on the leaning columns the scene was set down with (column_lean.py)
+        self.substep_plan = plan_substeps(self.model, self.config, self.state, lean=scene_lean(self.model, self.config))
         self.substeps = self.substep_plan.substeps
         self._gravity_magnitude = float(np.linalg.norm(self.config.gravity))
         if self.sleep is not None:
