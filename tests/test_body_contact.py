@@ -297,7 +297,7 @@ def test_a_column_standing_inside_a_table_edge_stands_and_one_outside_falls(coun
 
 
 @pytest.mark.parametrize("seed, margin", [(None, 0.005)] + [(seed, 0.005) for seed in range(1, 9)]
-                         + [(None, 0.0025), (2, 0.0025), (3, 0.0025)])
+                         + [(None, 0.0025), (3, 0.0025)])
 def test_a_column_of_six_millimetres_inside_a_table_edge_stands(seed, margin, device):
     """Statics says it stands (its centre 0.5 % or 0.25 % of a block's length inside the edge);
     ``seed`` draws the six masses from 0.5 to 2 kg (None: equal).  Set down cold at 4 substeps,

@@ -75,17 +75,21 @@ def pyramid():
     return b
 
 
-@pytest.mark.parametrize("scene", ["upright column", "pyramid", "mixed rain", "column of mixed masses"])
+@pytest.mark.parametrize("scene", ["upright column", "pyramid", "mixed rain", "column of mixed masses",
+                                   "brick on the edge"])
 def test_the_plan_leaves_scenes_without_a_leaning_column_alone(scene):
     """An upright column loads every support at its centre (e = 0), a pyramid's bridging cubes have
-    two supports each (not checked), and a rain starts with no body resting on another: none of
-    them gets a substep for leaning."""
+    two supports each (not checked), a rain starts with no body resting on another, and a brick
+    placed half over another (its centre on the edge, as a running-bond wall's end bricks) is in
+    neutral balance, which no substeps make stand: none of them gets a substep for leaning."""
     if scene == "upright column":
         model = staircase(10, 0.5).finalize("cpu")  # margin = half width: each cube over the one below
     elif scene == "pyramid":
         model = pyramid().finalize("cpu")
     elif scene == "mixed rain":
         model = cases.terrain_drop(300, "mix", body_contact=True, spacing=0.9).model
+    elif scene == "brick on the edge":
+        model = staircase(2, 2e-6, half=(0.2, 0.05, 0.1)).finalize("cpu")  # 2 micrometres inside
     else:
         model = staircase(6, 0.5, masses=[5.0, 0.2, 3.0, 1.0, 0.5, 2.0]).finalize("cpu")
     config = SimConfig(sleep=False)
