@@ -296,12 +296,12 @@ def test_a_column_standing_inside_a_table_edge_stands_and_one_outside_falls(coun
     assert column_at_a_table_edge(count, half, -0.02, weights, device) > 30.0
 
 
-@pytest.mark.parametrize("seed, margin", [(None, 0.005)] + [(seed, 0.005) for seed in range(1, 9)]
-                         + [(None, 0.0025), (3, 0.0025)])
+@pytest.mark.parametrize("seed, margin", [(None, 0.005), (2, 0.005), (3, 0.005), (6, 0.005), (3, 0.0025)])
 def test_a_column_of_six_millimetres_inside_a_table_edge_stands(seed, margin, device):
     """Statics says it stands (its centre 0.5 % or 0.25 % of a block's length inside the edge);
     ``seed`` draws the six masses from 0.5 to 2 kg (None: equal).  Set down cold at 4 substeps,
-    soft contacts tip such a column (2 of these 8 random ones at 5 mm, every one tried at 2.5 mm):
+    soft contacts tip such a column (seeds 2 and 3 of 8 random ones at 5 mm, every one tried at
+    2.5 mm; bench/column_lean.py has the other seeds' family):
     it needs a margin of about sqrt(e S), and the substep plan picks the substeps that keep twice
     that under the margin (warp_sim/column_lean.py; 15 to 26 substeps at 5 mm)."""
     weights = np.ones(6) if seed is None else np.random.default_rng(seed).uniform(0.5, 2.0, 6)

@@ -37,20 +37,19 @@ COLUMNS = {
 @pytest.mark.parametrize("name", list(COLUMNS))
 def test_a_leaning_column_set_down_cold_stands_at_the_defaults(name):
     """The defaults' plan raises the substeps and the column stands: no box moves sideways by half
-    its margin in 3 s.  Half the margin is the plan's own bound: it keeps sqrt(e S), about the
+    its margin in 2 s (the swing that tips a column comes within the first second).  Half the margin is the plan's own bound: it keeps sqrt(e S), about the
     swing that setting the column down starts (column_lean.py), at margin / LEAN_SAFETY, and the
     static shift S itself is smaller still (S < sqrt(e S) while S < e).  The same column at the
-    requested 4 substeps with the plan off tips past its margin (most fall within the 3 s), so the
-    check can fail."""
+    requested 4 substeps with the plan off tips past twice its margin, so the check can fail."""
     kwargs = COLUMNS[name]
     sim = Simulator(staircase(**kwargs).finalize("cpu"), SimConfig(sleep=False))
     plan = sim.substep_plan
     assert plan.raised_by == "lean" and plan.substeps > 4, plan.describe()
     assert plan.lean_margin == pytest.approx(kwargs["margin"], rel=1e-3)
     assert plan.lean_need <= plan.lean_margin
-    assert largest_move(sim, 3.0) < 0.5 * kwargs["margin"]
+    assert largest_move(sim, 2.0) < 0.5 * kwargs["margin"]
     cold = Simulator(staircase(**kwargs).finalize("cpu"), SimConfig(sleep=False, auto_substeps=False))
-    assert largest_move(cold, 3.0) > 2.0 * kwargs["margin"]
+    assert largest_move(cold, 2.0) > 2.0 * kwargs["margin"]
 
 
 @pytest.mark.parametrize("count, margin", [(3, -0.02), (5, -0.05)])
