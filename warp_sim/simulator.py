@@ -5,13 +5,13 @@ with ``auto_substeps`` (the default) the simulator runs more where the columns t
 with would sag past ``column_sag`` under their soft contacts (column_sag.py; ``Simulator.substeps``
 and ``substep_plan`` say what runs and why).  With ``contact_update = "substep"`` each substep is
 
-    collide_terrain(state_0) -> [pairs: broad -> narrow -> warm-start carry -> colouring]
+    [pairs: broad -> narrow -> warm-start carry -> colouring] -> collide_terrain(state_0)
     -> solver.step(state_0 -> state_1) -> [pairs: keep impulses] -> swap
     (without pairs, the first of an odd number of substeps runs in place: solvers/solver.py)
 
 With ``"step"`` (the default, Box2D v3's soft step) the collision stages run once, at the start
-of the step, with speculative margins widened to cover the whole step (and, after the pairs,
-the terrain slots of boxes a partner could strike: collide/struck_reach.py); the substeps then
+of the step, with speculative margins widened to cover the whole step (the pairs first, so a box's
+terrain windows cover what a partner's blow could give it: collide/struck_reach.py); the substeps then
 solve those contacts with gaps updated from the bodies' motion (solvers/staged.py).  That
 applies to scenes with body-body contact; the fused terrain-only kernel re-collides every
 substep either way.  Then, with sleeping on, the sleep timers are updated (sleep.py).  The
@@ -201,10 +201,10 @@ class Simulator:
         return tuple(float(share * self.substep_dt * g) for g in self.config.gravity)
 
     def collide(self, state, contacts, h: float, speculative_margin: float, refresh_spheres: bool = False,
-                struck_only: bool = False, carry_still: bool = True):
+                struck: bool = False, carry_still: bool = True):
         """Terrain contacts of ``state``; ``refresh_spheres``: only the spheres', found again between a
-        step's passes, relative to the pass's pose; ``struck_only``: only the boxes whose reach a partner
-        widened (collide/struck_reach.py); ``carry_still``: still bodies' slots carried (still_contacts.py)."""
+        step's passes, relative to the pass's pose; ``struck``: boxes' windows opened with the reach their
+        partners could give them (collide/struck_reach.py); ``carry_still``: still slots carried (still_contacts.py)."""
         m = self.physics_model
         if m.terrain_kind == TERRAIN_NONE or m.checkpoint_count == 0:
             return
@@ -213,7 +213,7 @@ class Simulator:
             bind(BodyModel, m, m), bind(TerrainModel, m, m),
             # Settings
             h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-            int(refresh_spheres), int(struck_only), int(self.config.face_search), int(self.closest_jet),
+            int(refresh_spheres), int(struck), int(self.config.face_search), int(self.closest_jet),
             int(carry_still and self.config.still_contacts),
             # State in, Solver in, In
             bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
@@ -326,16 +326,16 @@ class Simulator:
                 and bool(np.any(m.host["body_shape"] == SHAPE_SPHERE)))
 
     def _collide_pass(self, h: float, margin: float, sweep_time: float):
-        """Terrain and pair collision of states[0]; with sleeping on, the sleepers an awake body
-        touches are woken and, only then, the pass is run again with them awake (sleep.py).
-        Returns the colour sizes of the pairs."""
+        """Pair and terrain collision of states[0]; with sleeping on, the sleepers an awake body touches
+        are woken and, only then, the pass is run again with them awake (sleep.py).  Returns the colour sizes."""
         def collide():
-            self._stage("terrain", self.collide, self.states[0], self.contacts, h, margin)
+            m, state = self.physics_model, self.states[0]  # pairs first: collide/struck_reach.py
             if self.pairs is not None:
-                self._stage("pairs", self._collide_pairs, margin, sweep_time)
-                m, state = self.physics_model, self.states[0]
-                self._stage("terrain", self.struck.widen, bind(BodyModel, m, m), state, self.contacts, margin,
-                            h, lambda: self.collide(state, self.contacts, h, margin, struck_only=True))
+                self._stage("pairs", self._collide_pairs, margin, sweep_time, None, None, False)
+                self._stage("terrain", self.struck.find, bind(BodyModel, m, m), state, self.contacts, margin, h)
+            self._stage("terrain", self.collide, state, self.contacts, h, margin, False, self.pairs is not None)
+            if self.pairs is not None:
+                self._stage("pairs", self.pairs.partition, state, self.contacts)
 
         collide()
         if self.sleep is not None and self.pairs is not None:
@@ -363,7 +363,7 @@ class Simulator:
                 self.states[0], self.states[1] = self.states[1], self.states[0]
         self._keep_output_buffer(in_place)
 
-    def _collide_pairs(self, margin: float, sweep_time: float, state=None, moved=None):
+    def _collide_pairs(self, margin: float, sweep_time: float, state=None, moved=None, partition: bool = True):
         """The pair pipeline on states[0] (or on ``state``, with ``moved``: a mid-step pass, see
         PairContactPipeline.collide); grows the buffers first if they would overflow (direct
         stepping checks on the host right after the broad phase; a captured step raises the
@@ -377,10 +377,10 @@ class Simulator:
                 self.contacts.check_overflow()
             self._grow(demand)
             return self.pairs.collide(state, self.contacts, margin, sweep_time, self._gravity_magnitude,
-                                      on_overflow=grow, moved=moved)
+                                      on_overflow=grow, moved=moved, partition=partition)
 
         sizes = self.pairs.collide(state, self.contacts, margin, sweep_time, self._gravity_magnitude,
-                                   on_overflow=grow, moved=moved)
+                                   on_overflow=grow, moved=moved, partition=partition)
         if self.pairs.capturable:
             wp.launch(note_pair_overflow, dim=1, device=self.device,
                       inputs=[self.contacts.pair_demand, self.pairs.capacity, self.pair_overflow])

@@ -66,7 +66,7 @@ class PairContactPipeline:
                                            self.boundary_body_count, self.boundary_body)
 
     def collide(self, state, contacts, margin: float, sweep_time: float = 0.0, gravity: float = 0.0,
-                on_overflow=None, moved=None) -> list[int]:
+                on_overflow=None, moved=None, partition: bool = True) -> list[int]:
         """Find the pairs and manifolds of ``state``; returns the pair count of each colour.
 
         ``on_overflow(demand)``: when not capturable, called once the broad phase has found more
@@ -81,6 +81,9 @@ class PairContactPipeline:
         poses at which the step's contacts were found (the solver's reference) and ``moved`` the
         bodies now (a MovedBodies); the pairs are found at the reference pose, so that every manifold of the step
         is measured from one pose, with reaches grown by the way each body has come since.
+
+        ``partition = False``: the slabs are cut later, by ``partition`` (a pass that finds the terrain
+        slots after the pairs: their counts weigh the slabs' work).
         """
         m = self.model
         if moved is None:
@@ -119,24 +122,32 @@ class PairContactPipeline:
             device=self.device)
         if self.colors:
             self.coloring.run(m.body_inv_mass, contacts, None if self.capturable else self.live_dim)
-        if self.domain_count > 0:
-            wp.launch(partition_domains, dim=1, device=self.device, inputs=[
-                self.domain_count, m.body_inv_mass, state.body_pos,
-                contacts.terrain_contact_count, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
-                self.body_weight, self.body_domain, self.bin_weight, self.bin_work_before, self.bin_crossing,
-                self.bin_domain, self.domain_cursor,
-                self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair,
-                self.body_on_boundary, self.boundary_body_count, self.boundary_body])
-            bounds = self.domain_pair_start.numpy()
-            self.schedule.boundary_pairs = int(bounds[-1] - bounds[-2])
-            listed = self.domain_body_start.numpy()
-            self.schedule.static_bodies = int(listed[-1] - listed[-2])
+        if partition:
+            self.partition(state, contacts)
         if not self.colors:
             return [0] * (COLOR_COUNT + 1)  # not coloured: the slabs schedule every pair
         if self.capturable:
             return self.coloring.launch_bounds()
         starts = contacts.color_start.numpy()
         return [int(starts[k + 1] - starts[k]) for k in range(COLOR_COUNT + 1)]
+
+    def partition(self, state, contacts):
+        """Cut the slabs of the CPU pair schedule (schedule/slabs.py) for the pairs and terrain slots of
+        ``contacts``; nothing without slabs."""
+        if self.domain_count == 0:
+            return
+        m = self.model
+        wp.launch(partition_domains, dim=1, device=self.device, inputs=[
+            self.domain_count, m.body_inv_mass, state.body_pos,
+            contacts.terrain_contact_count, contacts.pair_count, contacts.pair_body, contacts.pair_point_count,
+            self.body_weight, self.body_domain, self.bin_weight, self.bin_work_before, self.bin_crossing,
+            self.bin_domain, self.domain_cursor,
+            self.domain_body_start, self.domain_body, self.domain_pair_start, self.domain_pair,
+            self.body_on_boundary, self.boundary_body_count, self.boundary_body])
+        bounds = self.domain_pair_start.numpy()
+        self.schedule.boundary_pairs = int(bounds[-1] - bounds[-2])
+        listed = self.domain_body_start.numpy()
+        self.schedule.static_bodies = int(listed[-1] - listed[-2])
 
     def report_color_overflow(self):
         """Says once (a RuntimeWarning) when a colouring since the last call left pairs to the

@@ -15,13 +15,15 @@ k_b / (k_b + k_o) of speed, k the compliance 1/m + r^2 / I at the contact; bound
 k_b = 1/m_b + R^2 / I_min (the most) and k_o >= 1/m_o (the least), and v_rel by the two bodies'
 fastest points, |v_b - v_o| + |w_b| R_b + |w_o| R_o.  So after the pairs are found, each box in
 a pair with a dynamic partner takes its own reach plus 2 v_rel k_b / (k_b + 1/m_o)
-(``struck_reach``, one thread per pair, by atomic maximum: the same whatever the threads' order),
-and the boxes whose window that widens have their terrain slots found again at the same pose
-(collide_terrain's ``struck_only``), only in passes where some did (a device flag,
-``wp.capture_if``).  A gain that carries a point less than the speculative margin within the
-step is left to the margin, the window's allowance for motion the pass cannot predict: taken
-at any gain, the resting neighbours' jitter re-collided every box of a settling rain.  Bodies falling together (v_rel ~ 0) widen nothing; taken on both bodies'
-energies instead, the bound widened most boxes of a falling rain and cost it 11 % of its speed.
+(``struck_reach``, one thread per pair, by atomic maximum: the same whatever the threads' order).
+A pass therefore finds the pairs first and the terrain slots after, each box's windows opened with
+the larger of the two reaches (collide_terrain's ``struck``): one terrain launch.  (The terrain came
+first once, and the boxes a partner widened were found a second time at the same pose; that second
+launch cost 1.3 to 3.5 ms a step of the 10k rain.)  A gain that carries a point less than the
+speculative margin within the step is left to the margin, the window's allowance for motion the
+pass cannot predict: taken at any gain, the resting neighbours' jitter widened every box of a
+settling rain.  Bodies falling together (v_rel ~ 0) widen nothing; taken on both bodies' energies
+instead, the bound widened most boxes of a falling rain and cost it 11 % of its speed.
 """
 
 import warp as wp
@@ -96,11 +98,10 @@ def struck_reach(
     body_reach_terms: wp.array(dtype=wp.vec4),
     # Out
     body_struck_reach: wp.array(dtype=float),
-    widened: wp.array(dtype=wp.int32),
 ):
     """One thread per pair slot (past the live count: return): each box of a pair whose partner is
     dynamic takes its own reach plus 2 v_rel k_b / (k_b + 1/m_o) (module docstring), by atomic
-    maximum; ``widened`` is raised where that exceeds the box's own."""
+    maximum."""
     p = wp.tid() + tid_offset
     if p >= pair_count[0] or pair_point_count[p] == 0:
         return
@@ -114,30 +115,25 @@ def struck_reach(
         gain = 2.0 * mine[2] / (mine[2] + other[3]) * relative
         if mine[2] > 0.0 and other[3] > 0.0 and gain > least_gain:
             wp.atomic_max(body_struck_reach, ij[side], mine[0] + gain)
-            wp.atomic_max(widened, 0, 1)
 
 
 class StruckReach:
-    """The per-body reach struck_reach finds, and the pass that widens the slots it concerns."""
+    """The per-body reach struck_reach finds, read by the terrain pass that follows the pairs."""
 
     def __init__(self, body_count: int, device):
         self.device = device
         self.body_count = body_count
         self.body_struck_reach = wp.zeros(max(body_count, 1), dtype=float, device=device)
         self.body_reach_terms = wp.zeros(max(body_count, 1), dtype=wp.vec4, device=device)
-        self.widened = wp.zeros(1, dtype=wp.int32, device=device)
 
-    def widen(self, model_args, state, contacts, margin: float, sweep_time: float, collide_struck):
-        """After a pass's pairs: the boxes' reach from their partners, then, only if some box's
-        widened, ``collide_struck()`` (its terrain slots again).  The pair launch is one launch,
-        never split: atomics (launch.py)."""
+    def find(self, model_args, state, contacts, margin: float, sweep_time: float):
+        """After a pass's pairs, before its terrain slots: the boxes' reach from their partners (0 where
+        no partner widens it).  The pair launch is one launch, never split: atomics (launch.py)."""
+        self.body_struck_reach.zero_()
         if contacts.pair_max == 0:
             return
-        self.body_struck_reach.zero_()
-        self.widened.zero_()
         launch(body_reach_terms, self.body_count, key=self, device=self.device, inputs=[
             model_args, bind(BodyState, state, state), self.body_reach_terms])
         wp.launch(struck_reach, dim=contacts.pair_max, device=self.device, **gpu_blocks(self.device), inputs=[
             0, contacts.pair_count, contacts.pair_body, contacts.pair_point_count, margin / sweep_time, state.body_vel,
-            self.body_reach_terms, self.body_struck_reach, self.widened])
-        wp.capture_if(self.widened, on_true=collide_struck)
+            self.body_reach_terms, self.body_struck_reach])

@@ -328,7 +328,7 @@ def collide_terrain(
     speculative_margin: float,
     cull: int,
     refresh_spheres: int,
-    struck_only: int,
+    struck: int,
     face_search: int,
     jet_search: int,
     still_contacts: int,
@@ -352,11 +352,9 @@ def collide_terrain(
     curvature k, which made a ball rolling in a valley gain 16 % of its energy in 20 s.  Boxes are
     left as they are (their slots and count).
 
-    ``struck_only``: after the pairs of a pass, only the boxes whose reach a partner widened
-    (struck_reach.py, ``body_struck_reach``), their slots found again at the same pose with it."""
+    ``struck``: a pass whose pairs were found first: a box takes the reach a partner's blow could give
+    its points where that exceeds its own (struck_reach.py, ``body_struck_reach``)."""
     body = wp.tid() + tid_offset
-    if struck_only != 0 and body_struck_reach[body] <= 0.0:
-        return  # no partner widened its reach (most bodies of a pass: struck_reach raises only a few)
     if refresh_spheres != 0:
         # only spheres touching the terrain since the step's pass, and only once they have moved:
         # a sphere whose slot the pass left idle cannot reach the surface within the step (the
@@ -397,16 +395,13 @@ def collide_terrain(
     if dynamic and not is_sphere:
         reach_speed = reachable_speed(v, state_in.body_angmom[body], rot, model.body_inertia[body],
                                       model.body_inv_inertia[body], model.body_inv_mass[body], half)
-    if struck_only != 0:
-        # before any terrain sample; a body past the test at the top is a dynamic box (struck_reach
-        # raises only bodies with a compliance, and a sphere's or a static body's is 0)
-        if body_struck_reach[body] <= reach_speed:
-            return
-        reach_speed = body_struck_reach[body]
+    if struck != 0 and dynamic and not is_sphere:
+        # before the still test: the windows, found afresh or carried (still_contacts.py), open with it
+        reach_speed = wp.max(reach_speed, body_struck_reach[body])
     floor = float(0.0)  # the windows' least approach speed while still bodies are carried (still_contacts.py)
     if still_contacts != 0 and terrain.terrain_kind == TERRAIN_FOURIER:
         floor = window_floor(h, gap_scale)
-        if refresh_spheres == 0 and struck_only == 0 and dynamic:
+        if refresh_spheres == 0 and dynamic:
             reach = float(0.0)
             spin = wp.length(omega)
             quiet = wp.length(v)
