@@ -237,15 +237,19 @@ def sweep_body_terrain(
         for k in range(count):
             if slots.terrain_contact_normal_impulse[solver.terrain_row_slot[start + k]] > 0.0:
                 holding = 1
-        engage = engage_speed(settings.gravity, settings.h)
-        for k in range(count):
-            slot = solver.terrain_row_slot[start + k]
-            arm = slots.terrain_contact_point[slot] - x_ref
-            n = slots.terrain_contact_normal[slot]
-            separation = -slots.terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
-            carried = slots.terrain_contact_normal_impulse[slot]
-            if holding != 0 and row_meets_an_impact(arm, n, separation, carried, v, w, settings.h, engage):
-                holding = 0
+                break
+        if holding != 0:
+            # only a holding body's rows are asked, and the first that meets a blow settles it
+            engage = engage_speed(settings.gravity, settings.h)
+            for k in range(count):
+                slot = solver.terrain_row_slot[start + k]
+                arm = slots.terrain_contact_point[slot] - x_ref
+                n = slots.terrain_contact_normal[slot]
+                separation = -slots.terrain_contact_depth[slot] + wp.dot(drift_p + drift_r * arm, n)
+                if row_meets_an_impact(arm, n, separation, slots.terrain_contact_normal_impulse[slot], v, w,
+                                       settings.h, engage):
+                    holding = 0
+                    break
         passes = solve_sweeps(1, settings.relax_passes, count, holding)
     reach = wp.length(model.body_size[i])
     inv_inertia = solver.solver_inv_inertia[i]
