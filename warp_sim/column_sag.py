@@ -317,6 +317,15 @@ def plan_budgets(model, config) -> tuple[float, float]:
     return scale * float(config.column_sag), scale * float(config.landing_depth)
 
 
+def standing_poses(model, state=None) -> tuple:
+    """Body positions and rotation matrices as the model places them, or as ``state`` holds them: read
+    back at build and between steps (Simulator.update_settings), never inside a step."""
+    host = model.host
+    if state is None:
+        return host["body_pos"], host["body_rot"]
+    return state.body_pos.numpy(), state.body_rot.numpy()
+
+
 def scene_lean(model, config, state=None) -> list:
     """column_lean.lean_terms of the columns ``model`` starts with (or stands in ``state``): what
     plan_substeps checks leaning columns against."""
@@ -325,7 +334,7 @@ def scene_lean(model, config, state=None) -> list:
     if g == 0.0 or not config.body_contact or np.count_nonzero(host["body_inv_mass"] > 0) < 2:
         return []
     up = -np.asarray(config.gravity, dtype=np.float64) / g
-    pos, rot = (host["body_pos"], host["body_rot"]) if state is None else (state.body_pos.numpy(), state.body_rot.numpy())
+    pos, rot = standing_poses(model, state)
     terrain = getattr(model, "terrain", None)
     height = getattr(terrain, "height", None) if up[1] > 1.0 - 1e-9 else None  # the ground is a height in y
     return lean_terms(host, pos, rot, up, height)
@@ -355,8 +364,7 @@ def plan_substeps(model, config, state=None, lean=None) -> SubstepPlan:
     terms, count, fall = 0.0, 0, 0.0
     if g > 0.0 and config.body_contact and np.count_nonzero(dynamic) >= 2:
         up = -np.asarray(config.gravity, dtype=np.float64) / g
-        # read back at build and between steps (update_settings), never inside a step
-        pos, rot = (host["body_pos"], host["body_rot"]) if state is None else (state.body_pos.numpy(), state.body_rot.numpy())
+        pos, rot = standing_poses(model, state)
         p = np.asarray(pos, dtype=np.float64)[dynamic]
         mass = 1.0 / host["body_inv_mass"][dynamic].astype(np.float64)
         # a column one body wide: the median body's volume-equivalent diameter

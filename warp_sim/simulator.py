@@ -329,13 +329,14 @@ class Simulator:
         """Pair and terrain collision of states[0]; with sleeping on, the sleepers an awake body touches
         are woken and, only then, the pass is run again with them awake (sleep.py).  Returns the colour sizes."""
         def collide():
-            m, state = self.physics_model, self.states[0]  # pairs first: collide/struck_reach.py
-            if self.pairs is not None:
-                self._stage("pairs", self._collide_pairs, margin, sweep_time, None, None, False)
+            m, state, pairs = self.physics_model, self.states[0], self.pairs  # pairs first: struck_reach.py
+            if pairs is not None:
+                self._stage("pairs", functools.partial(self._collide_pairs, partition=False), margin, sweep_time)
                 self._stage("terrain", self.struck.find, bind(BodyModel, m, m), state, self.contacts, margin, h)
-            self._stage("terrain", self.collide, state, self.contacts, h, margin, False, self.pairs is not None)
-            if self.pairs is not None:
-                self._stage("pairs", self.pairs.partition, state, self.contacts)
+            terrain = functools.partial(self.collide, struck=pairs is not None)  # the boxes' struck reach
+            self._stage("terrain", terrain, state, self.contacts, h, margin)
+            if pairs is not None:
+                self._stage("pairs", pairs.partition, state, self.contacts)
 
         collide()
         if self.sleep is not None and self.pairs is not None:
@@ -365,9 +366,8 @@ class Simulator:
 
     def _collide_pairs(self, margin: float, sweep_time: float, state=None, moved=None, partition: bool = True):
         """The pair pipeline on states[0] (or on ``state``, with ``moved``: a mid-step pass, see
-        PairContactPipeline.collide); grows the buffers first if they would overflow (direct
-        stepping checks on the host right after the broad phase; a captured step raises the
-        device flag that ``step`` reads)."""
+        PairContactPipeline.collide); grows the buffers first if they would overflow (direct stepping checks
+        on the host right after the broad phase; a captured step raises the device flag that ``step`` reads)."""
         state = self.states[0] if state is None else state
         self.pairs.measure_patch = self.config.face_friction == "patch"  # collide/contact_patch.py
 

@@ -182,20 +182,19 @@ def solve_pair_points(
     # (a ball on a box keeps the start pose plus the shifts here: a face's normal is fixed, and an
     # edge's contact is found again wherever it lies; t0 = h, an impact at the substep's end,
     # leaves nothing to look at)
-    t0 = float(0.0)
-    if mode == MODE_SOLVE and spheres_apart:
-        t0 = pair_event_start(i, j, solver)
-        if t0 >= settings.h:
-            t0 = 0.0
     # A ball and a box whose impact this substep was each one's last event were met by the impact
     # stage where they touch, at t*, the box turned by w t* (impact_pair.pair_manifold_at), and parted
     # there.  Their row is built at the start pose, turned by nothing, and for a box spinning fast
     # its normal is off the one at t* by up to |w| h: the point that parts along the one may still
     # close along the other, and the row stopped it, an inelastic blow after an elastic one (a box at
     # 40 rad/s grazing a ball with e = 1: 0.6 to 8 % of the pair's energy lost).
+    t0 = float(0.0)
     bounced_apart = int(0)
-    if mode == MODE_SOLVE and (model.body_sphere_radius[i] > 0.0) != (model.body_sphere_radius[j] > 0.0):
-        if pair_event_start(i, j, solver) > 0.0:
+    if mode == MODE_SOLVE and (model.body_sphere_radius[i] > 0.0 or model.body_sphere_radius[j] > 0.0):
+        event = pair_event_start(i, j, solver)
+        if spheres_apart:
+            t0 = wp.where(event >= settings.h, 0.0, event)
+        elif event > 0.0:
             bounced_apart = 1
     # friction acts at the arms of the pair's patch (collide/contact_patch.py: measured when its
     # points were found)
