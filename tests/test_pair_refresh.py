@@ -42,7 +42,7 @@ def fresh_and_read(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3)
                    read_gap: wp.array(dtype=float), read_end_i: wp.array(dtype=wp.vec3),
                    read_end_j: wp.array(dtype=wp.vec3), fresh_count: wp.array(dtype=wp.int32)):
     """The fresh manifold at the current pose, and what the solver reads from the stored one."""
-    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin, 0)
     fresh_count[0] = m.count
     for k in range(m.count):
         fresh_depth[k] = m.depth[k]
@@ -114,7 +114,7 @@ def refresh(case, tolerance=0.0, device="cpu"):
 def store_pass(shape: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.vec3), rot: wp.array(dtype=wp.mat33),
                half: wp.array(dtype=wp.vec3), margin: float, normal: wp.array(dtype=wp.vec3), point: wp.array(dtype=wp.vec3),
                depth: wp.array(dtype=float), feature: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
-    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin)
+    m = collide_pair(shape[0], pos[0], rot[0], half[0], 0, shape[1], pos[1], rot[1], half[1], 0, margin, 0)
     count[0] = m.count
     normal[0] = m.normal
     for k in range(4):

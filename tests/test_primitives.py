@@ -53,9 +53,9 @@ def sphere_box_kernel(pos_a: wp.array(dtype=wp.vec3), size_a: wp.array(dtype=wp.
 def box_box_kernel(pos_a: wp.array(dtype=wp.vec3), rot_a: wp.array(dtype=wp.mat33),
                    size_a: wp.array(dtype=wp.vec3), pos_b: wp.array(dtype=wp.vec3),
                    rot_b: wp.array(dtype=wp.mat33), size_b: wp.array(dtype=wp.vec3), margin: float,
-                   out: wp.array(dtype=Manifold)):
+                   reference: int, out: wp.array(dtype=Manifold)):
     i = wp.tid()
-    out[i] = collide_box_box(pos_a[i], rot_a[i], size_a[i], 0, pos_b[i], rot_b[i], size_b[i], 0, margin)
+    out[i] = collide_box_box(pos_a[i], rot_a[i], size_a[i], 0, pos_b[i], rot_b[i], size_b[i], 0, margin, reference)
 
 
 @wp.kernel
@@ -74,7 +74,7 @@ def pair_kernel(shape_a: wp.array(dtype=int), pos_a: wp.array(dtype=wp.vec3), ro
                 out: wp.array(dtype=Manifold)):
     i = wp.tid()
     out[i] = collide_pair(shape_a[i], pos_a[i], rot_a[i], size_a[i], 0, shape_b[i], pos_b[i], rot_b[i],
-                          size_b[i], 0, margin)
+                          size_b[i], 0, margin, 0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -125,8 +125,9 @@ def mat33s(shapes, device="cpu"):
     return wp.array(np.array([s["rot"] for s in shapes], dtype=np.float32), dtype=wp.mat33, device=device)
 
 
-def collide(kind, pairs, margin=MARGIN, device="cpu"):
-    """Run one kernel over a list of (A, B) pairs; returns a list of result dicts."""
+def collide(kind, pairs, margin=MARGIN, device="cpu", reference=0):
+    """Run one kernel over a list of (A, B) pairs; returns a list of result dicts.  ``reference``:
+    box_box's preferred face in near ties (primitives.reference_body: 1 A's, 2 B's, 0 neither)."""
     a = [p[0] for p in pairs]
     b = [p[1] for p in pairs]
     out = wp.empty(len(pairs), dtype=Manifold, device=device)
@@ -146,10 +147,12 @@ def collide(kind, pairs, margin=MARGIN, device="cpu"):
                           shape_b, vec3s(b, "pos", device), mat33s(b, device), vec3s(b, "size", device),
                           margin, out])
     else:
-        kernel = box_box_kernel if kind == "box_box" else box_box_thesis_kernel
-        wp.launch(kernel, len(pairs), device=device,
-                  inputs=[vec3s(a, "pos", device), mat33s(a, device), vec3s(a, "size", device),
-                          vec3s(b, "pos", device), mat33s(b, device), vec3s(b, "size", device), margin, out])
+        inputs = [vec3s(a, "pos", device), mat33s(a, device), vec3s(a, "size", device),
+                  vec3s(b, "pos", device), mat33s(b, device), vec3s(b, "size", device), margin]
+        if kind == "box_box":
+            wp.launch(box_box_kernel, len(pairs), device=device, inputs=[*inputs, reference, out])
+        else:
+            wp.launch(box_box_thesis_kernel, len(pairs), device=device, inputs=[*inputs, out])
     results = []
     for record in out.numpy():
         n = int(record["count"])
@@ -433,6 +436,38 @@ def test_box_box_near_aligned_stack_has_no_phantom_contacts(device):
         assert r["normal"] @ UP > math.cos(2.5e-4)
         assert np.all(np.abs(r["depth"] - depth) <= bound)
         assert_features_name_the_touching_features(a, b, r, atol=2e-4)
+
+
+def test_box_box_near_parallel_faces_take_the_preferred_face_as_reference(device):
+    """Two boxes face to face (half extents 0.1..1 m, footprints offset, 0 to 3 cm deep), B tilted
+    by 1e-5 to 1e-4 rad: their face axes tie to within the tilt times the size, under the tie
+    tolerance (1e-4 of the summed half extents), and the face of the body ``reference`` names is
+    the reference, with A below or above: the normal lies within a tenth of the tilt of that box's
+    face axis (float32 resolves 1e-7 rad).  Tilted by 0.05 to 0.2 rad the axes no longer tie, and
+    the preference changes nothing: the manifold is the same for every ``reference``."""
+    rng = np.random.default_rng(7)
+    near, far = [], []
+    for k in range(120):
+        half_a, half_b = rng.uniform(0.1, 1.0, 3), rng.uniform(0.1, 1.0, 3)
+        offset = rng.uniform(-0.3, 0.3, 3) * np.minimum(half_a, half_b)
+        side = 1.0 if k % 2 == 0 else -1.0  # A above B, or below it
+        offset[1] = side * (half_a[1] + half_b[1] - rng.uniform(0.0, 0.03))
+        axis = (math.cos(k), 0.0, math.sin(k))  # a tilt of the faces, not a turn within them
+        tilt = 10.0 ** rng.uniform(-5, -4)
+        near.append((box(offset, half_a), box((0.0, 0.0, 0.0), half_b, rotation(axis, tilt))))
+        far.append((box(offset, half_a), box((0.0, 0.0, 0.0), half_b, rotation(axis, rng.uniform(0.05, 0.2)))))
+    for reference, index in ((1, 0), (2, 1)):
+        for pair, r in zip(near, collide("box_box", near, device=device, reference=reference)):
+            tilt = math.acos(min(1.0, pair[0]["rot"][:, 1] @ pair[1]["rot"][:, 1]))
+            off = math.acos(min(1.0, abs(r["normal"] @ pair[index]["rot"][:, 1])))
+            assert r["count"] >= 1
+            assert off < 0.1 * tilt, (reference, off, tilt)
+    plain = collide("box_box", far, device=device)
+    for reference in (1, 2):
+        for r0, r in zip(plain, collide("box_box", far, device=device, reference=reference)):
+            assert r["count"] == r0["count"]
+            np.testing.assert_array_equal(r["normal"], r0["normal"])
+            np.testing.assert_array_equal(r["point"], r0["point"])
 
 
 EDGE_CROSSING = (box((0, ROOT2 - 0.02, 0), CUBE, rotation((1, 0, 0), math.radians(45))),

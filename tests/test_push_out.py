@@ -232,29 +232,42 @@ def test_a_column_planned_past_the_budget_keeps_the_soft_law(ratio, device):
     assert fastest < 1.0
 
 
-SQUEEZED_OUT_WITHOUT_FRICTION = pytest.mark.xfail(strict=True, reason=(
-    "known limitation (README, found and not fixed): without friction a light cube between two heavy ones is "
-    "squeezed out sideways: the soft contacts let the upper cube tilt over the displaced light one, and its face "
-    "becomes a ramp under 1e5 N"))
+SQUEEZED_WITHOUT_FRICTION = pytest.mark.xfail(strict=True, reason=(
+    "known limitation (README, found and not fixed): without friction, a column of 3e4 kg cubes, of unequal heavy "
+    "cubes, with a 0.5 kg cube of half 0.3, or with the light cube off the axis still creeps sideways at 1.5 to 19 mm/s "
+    "in its second and third seconds, and an offset of 0.1 m between cubes of 1e3 kg is squeezed out at 11 m/s: off the "
+    "axis the heavy cubes tilt on their soft supports past the face tie (box_box.collide_box_box)"))
+# (below, above, light, half extent of the light cube, its offset along x): aligned columns stand
+# without friction once the light cube's faces are its contacts' references (box_box.collide_box_box)
+FRICTIONLESS = [(1e2, 1e2, 1.0, 0.5, 0.0), (1e3, 1e3, 1.0, 0.5, 0.0), (3e3, 3e3, 1.0, 0.5, 0.0),
+                (1e4, 1e4, 1.0, 0.5, 0.0), (1e4, 1e4, 2.0, 0.4, 0.0), (1e4, 3e3, 1.0, 0.5, 0.0)]
+FRICTIONLESS_FAILING = [(3e4, 3e4, 1.0, 0.5, 0.0), (1e4, 1e4, 0.5, 0.3, 0.0), (3e3, 3e4, 1.0, 0.5, 0.0),
+                        (3e4, 3e3, 0.5, 0.5, 0.0), (1e4, 1e4, 1.0, 0.5, 0.05), (1e3, 1e3, 1.0, 0.5, 0.1)]
 
 
-@pytest.mark.parametrize("below, above, friction", [
-    pytest.param(below, above, mu) for below in (3e3, 1e4, 3e4) for above in (3e3, 1e4) for mu in (0.3, 0.5, 1.0)
-] + [pytest.param(1e4, 1e4, 0.0, marks=SQUEEZED_OUT_WITHOUT_FRICTION)])
-def test_a_light_cube_between_two_heavy_ones_stands(below, above, friction, device):
-    """A 1 kg cube set down at rest between two cubes of 3e3 to 3e4 kg (the column the substep
-    plan raises to 30 to 55 substeps for, its sag planned just under column_sag).  Its loaded
-    contacts are not pushed back past the budget (contact_rows.loaded_soft): the load settling
-    overshot the plan's sag by a fraction of a millimetre, and the push through the light cube,
-    which two sweeps cannot converge against a body 1e4 times heavier, rang until the light cube
-    was thrown out at 5 to 11 m/s (9 of these 18 cases).  After the first second, as a resting
-    stack: no point faster than sleep_velocity, the speed below which the sleep rule takes a body
-    for still, and no body moving by a tenth of column_sag in two seconds."""
+@pytest.mark.parametrize("below, above, friction, light, half, offset", [
+    pytest.param(below, above, mu, 1.0, 0.5, 0.0) for below in (3e3, 1e4, 3e4) for above in (3e3, 1e4)
+    for mu in (0.3, 0.5, 1.0)
+] + [pytest.param(below, above, 0.0, light, half, offset) for below, above, light, half, offset in FRICTIONLESS]
+  + [pytest.param(below, above, 0.0, light, half, offset, marks=SQUEEZED_WITHOUT_FRICTION)
+     for below, above, light, half, offset in FRICTIONLESS_FAILING])
+def test_a_light_cube_between_two_heavy_ones_stands(below, above, friction, light, half, offset, device):
+    """A light cube (0.5 to 2 kg, half 0.3 to 0.5) set down at rest between two cubes of 1e2 to
+    3e4 kg (the column the substep plan raises to 30 to 64 substeps for, its sag planned just under
+    column_sag).  Its loaded contacts are not pushed back past the budget
+    (contact_rows.loaded_soft): the load settling overshot the plan's sag by a fraction of a
+    millimetre, and the push through the light cube, which two sweeps cannot converge against a
+    body 1e4 times heavier, rang until the light cube was thrown out at 5 to 11 m/s (9 of the 18
+    cases with friction).  Without friction every column was squeezed out (6 to 65 m/s within 3 s)
+    while the heavy cubes' faces, tilted on their soft supports, were the references of the light
+    cube's contacts.  After the first second, as a resting stack: no point faster than
+    sleep_velocity, the speed below which the sleep rule takes a body for still, and no body
+    moving by a tenth of column_sag in two seconds."""
     b = ModelBuilder(Material(restitution=0.0, friction=friction))
     b.set_terrain(PlaneTerrain())
     b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
-    b.add_box((0.5, 0.5, 0.5), 1.0, position=(0.0, 1.5, 0.0))
-    b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 2.5, 0.0))
+    b.add_box((half, half, half), light, position=(offset, 1.0 + half, 0.0))
+    b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 1.5 + 2.0 * half, 0.0))
     sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
     sim.step(60)
     start = sim.state.body_pos.numpy().copy()

@@ -17,7 +17,7 @@ import warp as wp
 
 from .contact_patch import NO_TWIST, pair_patch
 from .manifold import POINTS
-from .primitives import collide_pair, mat43
+from .primitives import collide_pair, reference_body, mat43
 
 wp.set_module_options({"enable_backward": False})
 
@@ -30,6 +30,7 @@ def collide_pairs(
     body_size: wp.array(dtype=wp.vec3),
     body_bound_radius: wp.array(dtype=float),
     body_covered_faces: wp.array(dtype=wp.int32),
+    body_inv_mass: wp.array(dtype=float),
     # Settings
     margin: float,
     # State in
@@ -58,7 +59,8 @@ def collide_pairs(
     # each body's sweep (reach - bound radius) widens the speculative margin, see swept_reach
     pair_margin = margin + (body_reach[i] - body_bound_radius[i]) + (body_reach[j] - body_bound_radius[j])
     m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i], body_covered_faces[i],
-                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin)
+                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin,
+                     reference_body(body_inv_mass[i], body_inv_mass[j]))
     pair_body[p] = ij
     pair_point_count[p] = m.count
     pair_normal[p] = m.normal

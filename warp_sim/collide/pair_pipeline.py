@@ -107,7 +107,7 @@ class PairContactPipeline:
         wp.copy(contacts.pair_count, self.broad.pair_count)
         wp.copy(contacts.pair_demand, self.broad.pair_demand)
         launch(collide_pairs, self.live_dim, key=self, capped=False, inputs=[
-            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, margin, state.body_pos,
+            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, m.body_inv_mass, margin, state.body_pos,
             state.body_rot, self.body_reach,
             self.broad.pair_body, self.broad.pair_count,
             contacts.pair_body, contacts.pair_point_count, contacts.pair_normal, contacts.pair_point,
@@ -170,7 +170,7 @@ class PairContactPipeline:
         m = self.model
         self.broad.run(state.body_pos, m.body_bound_radius, m.body_inv_mass, 0.0)
         launch(collide_pairs, self.capacity, [
-            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, 0.0, state.body_pos, state.body_rot,
+            m.body_shape, m.body_size, m.body_bound_radius, m.body_covered_faces, m.body_inv_mass, 0.0, state.body_pos, state.body_rot,
             m.body_bound_radius,
             self.broad.pair_body, self.broad.pair_count,
             probe.pair_body, probe.pair_point_count, probe.pair_normal, probe.pair_point,

@@ -131,12 +131,30 @@ PAIR_FUNCTIONS = {
 
 
 @wp.func
+def reference_body(inv_mass_a: float, inv_mass_b: float) -> int:
+    """Whose face a box pair's near tie between face axes takes as the reference
+    (box_box.collide_box_box): 1 for A, 2 for B, 0 for neither (the first axis found).  A static
+    body's, which no load tilts; else the lighter body's (see there)."""
+    if inv_mass_a == 0.0 and inv_mass_b > 0.0:
+        return 1
+    if inv_mass_b == 0.0 and inv_mass_a > 0.0:
+        return 2
+    if inv_mass_a > inv_mass_b:
+        return 1
+    if inv_mass_b > inv_mass_a:
+        return 2
+    return 0
+
+
+@wp.func
 def collide_pair(shape_a: int, pos_a: wp.vec3, rot_a: wp.mat33, size_a: wp.vec3, covered_a: int, shape_b: int,
-                 pos_b: wp.vec3, rot_b: wp.mat33, size_b: wp.vec3, covered_b: int, margin: float) -> Manifold:
+                 pos_b: wp.vec3, rot_b: wp.mat33, size_b: wp.vec3, covered_b: int, margin: float,
+                 reference: int) -> Manifold:
     """Any pair through one call; ``size`` is the radius in [0] for a sphere, the half extents
     for a box.  (box, sphere) runs as (sphere, box) and flips the normal back, so the result
     keeps this pair's (A, B) convention; points, depths and features are unchanged.  ``covered``:
-    the box's covered-face mask (covered_faces.py; 0 for a sphere or a dynamic box)."""
+    the box's covered-face mask (covered_faces.py; 0 for a sphere or a dynamic box).  ``reference``:
+    whose face a box pair's near tie takes (reference_body)."""
     if shape_a == SHAPE_SPHERE and shape_b == SHAPE_SPHERE:
         return collide_sphere_sphere(pos_a, size_a[0], pos_b, size_b[0], margin)
     if shape_a == SHAPE_SPHERE and shape_b == SHAPE_BOX:
@@ -146,5 +164,5 @@ def collide_pair(shape_a: int, pos_a: wp.vec3, rot_a: wp.mat33, size_a: wp.vec3,
         m.normal = -m.normal
         return m
     if shape_a == SHAPE_BOX and shape_b == SHAPE_BOX:
-        return collide_box_box(pos_a, rot_a, size_a, covered_a, pos_b, rot_b, size_b, covered_b, margin)
+        return collide_box_box(pos_a, rot_a, size_a, covered_a, pos_b, rot_b, size_b, covered_b, margin, reference)
     return manifold_empty()

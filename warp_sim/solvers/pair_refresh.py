@@ -52,7 +52,7 @@ import warp as wp
 from ..launch import launch
 from ..collide.contact_patch import pair_patch
 from ..collide.narrow_phase import POINTS, match_old_points
-from ..collide.primitives import SHAPE_SPHERE, collide_pair, mat43
+from ..collide.primitives import SHAPE_SPHERE, collide_pair, reference_body, mat43
 from .pair_geometry import anchor_weight
 from .soft_step import drift_rotation
 
@@ -152,7 +152,8 @@ def refresh_turned_pairs(
     # the pass's margin (collide_pairs): the reaches still cover the rest of the step
     pair_margin = margin + (body_reach[i] - body_bound_radius[i]) + (body_reach[j] - body_bound_radius[j])
     m = collide_pair(body_shape[i], body_pos[i], body_rot[i], body_size[i], body_covered_faces[i],
-                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin)
+                     body_shape[j], body_pos[j], body_rot[j], body_size[j], body_covered_faces[j], pair_margin,
+                     reference_body(body_inv_mass[i], body_inv_mass[j]))
     xi = solver_ref_pos[i]
     xj = solver_ref_pos[j]
     dpi = body_pos[i] - xi
