@@ -56,6 +56,7 @@ CASES = {
     "late_impact_tunnel": audit_cases.late_impact_tunnel,
     "heavy_gravity_landing": audit_stacks.heavy_gravity_landing,
     "mass_ratio_stack": audit_stacks.mass_ratio_stack,
+    "squeezed_cube": audit_stacks.squeezed_cube,
     "coarse_stack": audit_stacks.coarse_stack,
     "rolling_resistance": audit_stacks.rolling_resistance,
     "thin_box_rain": audit_stacks.thin_box_rain,

@@ -195,6 +195,36 @@ def mass_ratio_stack(quick: bool) -> list[dict]:
     return rows
 
 
+def squeezed_cube(quick: bool) -> list[dict]:
+    """Without friction, a light cube set down between two heavy ones: a rigid column stands, the
+    light cube neither squeezed out nor creeping (tests/test_push_out.py, the same columns)."""
+    rows = []
+    # (below, above, light, half extent of the light cube, its offset along x)
+    variants = [(1e4, 1e4, 1.0, 0.5, 0.0), (1e4, 1e4, 1.0, 0.5, 0.05)] if quick else [
+        (1e2, 1e2, 1.0, 0.5, 0.0), (1e3, 1e3, 1.0, 0.5, 0.0), (1e4, 1e4, 1.0, 0.5, 0.0), (3e4, 3e4, 1.0, 0.5, 0.0),
+        (1e4, 1e4, 2.0, 0.4, 0.0), (1e4, 1e4, 0.5, 0.3, 0.0), (3e3, 3e4, 1.0, 0.5, 0.0), (3e4, 3e3, 0.5, 0.5, 0.0),
+        (1e4, 1e4, 1.0, 0.5, 0.05), (1e3, 1e3, 1.0, 0.5, 0.1)]
+    for below, above, light, half, offset in variants:
+        b = ModelBuilder(Material(restitution=0.0, friction=0.0))
+        b.set_terrain(PlaneTerrain())
+        b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
+        b.add_box((half, half, half), light, position=(offset, 1.0 + half, 0.0))
+        b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 1.5 + 2.0 * half, 0.0))
+        sim = simulate(b, sleep=False)  # sleeping would stop a creep: the solver's own answer is wanted
+        sim.step(60)
+        start = host(sim, "body_pos").copy()
+        fastest = 0.0
+        for _ in range(120):
+            sim.step()
+            fastest = max(fastest, float(np.linalg.norm(host(sim, "body_vel"), axis=1).max()))
+        moved = float(np.linalg.norm(host(sim, "body_pos") - start, axis=1).max())
+        tag = f"{below:g} / {light:g} / {above:g} kg, light half {half:g}, offset {offset:g} m, mu 0, sleep off"
+        # at rest after the first second: the test's bound, a tenth of the planned sag budget in 2 s
+        rows.append(check("squeezed_cube", 8, tag, "no body moves in seconds 1 to 3", 0.0, moved,
+                          0.1 * sim.config.column_sag, "m", "max", f"fastest {fastest:.3g} m/s"))
+    return rows
+
+
 # 9. Coarse steps -----------------------------------------------------------------------------
 
 def coarse_stack(quick: bool) -> list[dict]:
