@@ -5,6 +5,8 @@
     python bench/rain.py --contact-updates step                 # the default mode only
     python bench/rain.py --counts 1000 10000 --broad-phases grid --contact-updates step \
         --impacts auto always --tag _impacts                    # the impact stage on this inelastic rain
+    python bench/rain.py --counts 10000 --broad-phases grid --contact-updates step \
+        --checkpoints-per-edge 3 2 --tag _checkpoints           # the boxes' terrain points: 26 or the 8 corners
 
 The scene is ``warp_sim.cases.terrain_drop(N, "mix", body_contact=True)`` at dt = 1/60 with 4
 substeps (Box2D's benchmark rate), with contacts found once per step (the default) and every
@@ -36,9 +38,11 @@ LIMITS = {"all_pairs": 3000, "bounding_sphere": 10000}
 
 
 def measure(count: int, broad_phase: str, contact_update: str, settle: float, steps: int, device: str,
-            sleep: bool, pair_schedule: str = "auto", impacts: str = "auto") -> dict:
+            sleep: bool, pair_schedule: str = "auto", impacts: str = "auto", per_edge: int | None = None) -> dict:
     row = {"bodies": count, "broad_phase": broad_phase, "contact_update": contact_update,
            "pair_schedule": pair_schedule, "impacts": impacts, "dt": 1 / 60, "substeps": 4, "sleep": sleep}
+    if per_edge is not None:
+        row["checkpoints_per_edge"] = per_edge
     if count > LIMITS.get(broad_phase, count):
         return {**row, "steps": 0, "wall_s": "", "steps_per_s": "", "body_steps_per_s": "", "contacts": "",
                 "awake": "", "peak_penetration_m": "", "max_penetration_m": "",
@@ -46,7 +50,8 @@ def measure(count: int, broad_phase: str, contact_update: str, settle: float, st
     capacity = count * (count - 1) // 2 + 64 if broad_phase == "all_pairs" else 0
     sim = cases.terrain_drop(count, "mix", body_contact=True, broad_phase=broad_phase, device=device,
                              spacing=0.9, sleep=sleep, contact_max=capacity, rolling_resistance=0.2,
-                             contact_update=contact_update, pair_schedule=pair_schedule, impacts=impacts)
+                             contact_update=contact_update, pair_schedule=pair_schedule, impacts=impacts,
+                             checkpoints_per_edge=per_edge)
     # the schedule "auto" resolved to: slabs on the CPU, colours on CUDA (solvers/domains.py)
     row["pair_schedule"] = "domains" if sim.pairs.domain_count else "colors"
     sim.step(1)
@@ -77,16 +82,18 @@ def chart(rows: list[dict], path: Path, title: str):
     import matplotlib.pyplot as plt
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
-    series = dict.fromkeys((r["broad_phase"], r["contact_update"], r["pair_schedule"], r.get("impacts", "auto"))
-                           for r in rows)
+    def key(r):  # the checkpoints, where a run varies them, count as impacts do: a series of their own
+        edge = f", {r['checkpoints_per_edge']} per edge" if "checkpoints_per_edge" in r else ""
+        return r["broad_phase"], r["contact_update"], r["pair_schedule"], r.get("impacts", "auto") + edge
+
+    series = dict.fromkeys(key(r) for r in rows)
     schedules = {r["pair_schedule"] for r in rows}
     # one colour per (broad phase, contact update); the colour schedule dashed
     palette = plt.get_cmap("tab10").colors
-    stages = {r.get("impacts", "auto") for r in rows}
+    stages = {k[3] for k in series}
     hues = {key: palette[k % len(palette)] for k, key in enumerate(dict.fromkeys(k[:2] + k[3:] for k in series))}
     for bp, update, schedule, impacts in series:
-        ok = [r for r in rows if (r["broad_phase"], r["contact_update"], r["pair_schedule"], r.get("impacts", "auto"))
-              == (bp, update, schedule, impacts) and r["status"] == "ok"]
+        ok = [r for r in rows if key(r) == (bp, update, schedule, impacts) and r["status"] == "ok"]
         if ok:
             label = (f"{bp}, contacts per {update}" + (f", {schedule}" if len(schedules) > 1 else "")
                      + (f", impacts {impacts}" if len(stages) > 1 else ""))
@@ -124,6 +131,8 @@ def main(argv=None) -> int:
                    help="how the body-body sweeps run in parallel (SimConfig.pair_schedule)")
     p.add_argument("--impacts", nargs="+", default=["auto"], choices=["auto", "always"],
                    help="SimConfig.impacts: the impact stage only with restitution (this rain has none), or always")
+    p.add_argument("--checkpoints-per-edge", type=int, nargs="+", default=[None], metavar="N",
+                   help="box terrain points per edge (the builder's default: 3 on the Fourier terrain)")
     p.add_argument("--sleep", action="store_true")
     p.add_argument("--device", default="cpu")
     p.add_argument("--tag", default="")
@@ -135,12 +144,13 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     rows = []
-    cases_ = [(n, b, u, s, i) for n in args.counts for b in args.broad_phases for u in args.contact_updates
-              for s in args.pair_schedules for i in args.impacts]
-    for count, bp, update, schedule, impacts in tqdm(cases_, desc="rain", unit="case"):
-        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep, schedule, impacts)
+    cases_ = [(n, b, u, s, i, e) for n in args.counts for b in args.broad_phases for u in args.contact_updates
+              for s in args.pair_schedules for i in args.impacts for e in args.checkpoints_per_edge]
+    for count, bp, update, schedule, impacts, per_edge in tqdm(cases_, desc="rain", unit="case"):
+        row = measure(count, bp, update, args.settle, args.steps, args.device, args.sleep, schedule, impacts, per_edge)
         rows.append(row)
-        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['pair_schedule']:8s} impacts {impacts:6s} "
+        edge = "" if per_edge is None else f" {per_edge} per edge"
+        tqdm.write(f"N={count:>7d} {bp:16s} per {update:8s} {row['pair_schedule']:8s} impacts {impacts:6s}{edge} "
                    f"{row['steps_per_s']!s:>9} steps/s  "
                    f"peak depth {row['peak_penetration_m']!s:>9} m  [{row['status']}]")
     name = f"rain_{args.device.replace(':', '')}{args.tag}"

@@ -2,6 +2,7 @@
 
     python bench/terrain_drop.py                       # N = 1k, 10k, 100k spheres and boxes on cpu
     python bench/terrain_drop.py --counts 1000 --shapes sphere --device cuda
+    python bench/terrain_drop.py --counts 10000 --shapes box --checkpoints-per-edge 2 --tag _corners
 
 Each case builds ``warp_sim.cases.terrain_drop`` (the scene the tests use; terrain contact
 only unless ``--body-contact``), simulates
@@ -26,8 +27,9 @@ from warp_sim import cases  # noqa: E402
 
 
 def measure(shape: str, count: int, dt: float, substeps: int, settle: float, steps: int, device: str,
-            body_contact: bool = False) -> dict:
-    sim = cases.terrain_drop(count, shape, dt=dt, substeps=substeps, device=device, body_contact=body_contact)
+            body_contact: bool = False, per_edge: int | None = None) -> dict:
+    sim = cases.terrain_drop(count, shape, dt=dt, substeps=substeps, device=device, body_contact=body_contact,
+                             checkpoints_per_edge=per_edge)
     sim.step(1)  # compile
     settle_steps = int(round(settle / dt))
     for _ in range(settle_steps):
@@ -43,6 +45,7 @@ def measure(shape: str, count: int, dt: float, substeps: int, settle: float, ste
         "shape": shape,
         "bodies": count,
         "body_contact": body_contact,
+        "checkpoints_per_edge": sim.model.host["checkpoints_per_edge"],
         "dt": dt,
         "substeps": substeps,
         "steps": steps,
@@ -86,6 +89,8 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=100)
     p.add_argument("--device", default="cpu")
     p.add_argument("--body-contact", action="store_true", help="also collide bodies with each other")
+    p.add_argument("--checkpoints-per-edge", type=int, default=None, metavar="N",
+                   help="box terrain points per edge (the builder's default: 3 on the Fourier terrain)")
     p.add_argument("--tag", default="", help="suffix for the result file names")
     args = p.parse_args(argv)
     wp.config.quiet = True
@@ -96,7 +101,8 @@ def main(argv=None) -> int:
 
     cases_list = [(s, n) for n in args.counts for s in args.shapes]
     for shape, count in tqdm(cases_list, desc="terrain_drop", unit="case"):
-        row = measure(shape, count, args.dt, args.substeps, args.settle, args.steps, args.device, args.body_contact)
+        row = measure(shape, count, args.dt, args.substeps, args.settle, args.steps, args.device, args.body_contact,
+                      args.checkpoints_per_edge)
         rows.append(row)
         tqdm.write(f"{shape:6s} N={count:>7d}: {row['steps_per_s']:>9.1f} steps/s "
                    f"{row['body_steps_per_s']:>12,d} body-steps/s  [{row['status']}]")

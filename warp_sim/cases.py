@@ -17,11 +17,11 @@ from .terrain import FourierTerrain, NoTerrain, PlaneTerrain
 GRAVITY = 9.81
 
 
-def _sim(builder: ModelBuilder, device="cpu", body_order="scene", **config) -> Simulator:
+def _sim(builder: ModelBuilder, device="cpu", body_order="scene", checkpoints_per_edge=None, **config) -> Simulator:
     # sleeping off: these cases measure the solver itself, not how soon it may stop
     config.setdefault("sleep", False)
     cfg = SimConfig(device=device, **config)
-    return Simulator(builder.finalize(device, body_order=body_order), cfg)
+    return Simulator(builder.finalize(device, checkpoints_per_edge, body_order=body_order), cfg)
 
 
 # Free flight ----------------------------------------------------------------------------------
@@ -192,17 +192,19 @@ DEFAULT_TERRAIN = FourierTerrain()
 def terrain_drop(count: int, shape="sphere", terrain: FourierTerrain | None = None, spacing=1.2, clearance=0.5,
                  radius=0.25, half_extents=(0.25, 0.25, 0.25), rolling_resistance=0.1, friction=0.6,
                  restitution=0.0, dt=1.0 / 60.0, substeps=4, seed=0, body_contact=False,
-                 device="cpu", body_order="scene", **config) -> Simulator:
+                 device="cpu", body_order="scene", checkpoints_per_edge=None, **config) -> Simulator:
     """``count`` bodies on a square grid above the Fourier terrain; ``shape`` sphere, box or mix.
 
     This is the benchmark scene too: the same bodies, the same terrain, the same drop heights.
     ``body_contact`` adds body-body collision (off: terrain contact only, the fused fast path);
-    ``body_order`` is how the Model stores them (body_order.py); other keyword arguments are
-    SimConfig fields (broad_phase, solver, sleep, ...).
+    ``body_order`` is how the Model stores them (body_order.py); ``checkpoints_per_edge`` the
+    boxes' terrain points (None: the builder's default); other keyword arguments are SimConfig
+    fields (broad_phase, solver, sleep, ...).
     """
     b = terrain_drop_builder(count, shape, terrain, spacing, clearance, radius, half_extents, rolling_resistance,
                              friction, restitution, seed)
-    return _sim(b, device, body_order, dt=dt, substeps=substeps, seed=seed, body_contact=body_contact, **config)
+    return _sim(b, device, body_order, checkpoints_per_edge, dt=dt, substeps=substeps, seed=seed,
+                body_contact=body_contact, **config)
 
 
 def terrain_drop_builder(count: int, shape="sphere", terrain: FourierTerrain | None = None, spacing=1.2,
