@@ -534,7 +534,7 @@ def collide_box_box(pos_a: wp.vec3, rot_a: wp.mat33, half_a: wp.vec3, covered_a:
     heavy face as the reference the load meets the light cube along a normal alpha off its own, a
     ramp that pushes it out with about F alpha (1 N from 1e-5 rad) and, as it moves, tilts the
     heavy cube further: it was squeezed out at 23 m/s within a second.  So within
-    EDGE_PREFERENCE_ABSOLUTE * (sum of half extents) of the best face axis (a tilt of 1e-4 across
+    EDGE_PREFERENCE_ABSOLUTE * (sum of half extents) of the best face axis (a few 1e-4 rad across
     the faces) the ``reference`` body's face wins (primitives.reference_body):
     a static body's, which no load tilts, else the lighter body's, whose two loaded faces then
     push it along one axis and cancel but for its weight.  With equal masses (``reference`` 0) the

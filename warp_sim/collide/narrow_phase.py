@@ -17,7 +17,7 @@ import warp as wp
 
 from .contact_patch import NO_TWIST, pair_patch
 from .manifold import POINTS
-from .primitives import collide_pair, reference_body, mat43
+from .primitives import collide_pair, mat43, reference_body
 
 wp.set_module_options({"enable_backward": False})
 

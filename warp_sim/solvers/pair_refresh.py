@@ -52,7 +52,7 @@ import warp as wp
 from ..launch import launch
 from ..collide.contact_patch import pair_patch
 from ..collide.narrow_phase import POINTS, match_old_points
-from ..collide.primitives import SHAPE_SPHERE, collide_pair, reference_body, mat43
+from ..collide.primitives import SHAPE_SPHERE, collide_pair, mat43, reference_body
 from .pair_geometry import anchor_weight
 from .soft_step import drift_rotation
 
