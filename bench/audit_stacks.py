@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_sim import FourierTerrain, ModelBuilder, NoTerrain, PlaneTerrain, SimConfig
+from warp_sim import FourierTerrain, ModelBuilder, NoTerrain, PlaneTerrain, SimConfig, cases
 from warp_sim.builder import Material, inertia_box
 from warp_sim.scene import parse_scene
 
@@ -205,12 +205,8 @@ def squeezed_cube(quick: bool) -> list[dict]:
         (1e4, 1e4, 2.0, 0.4, 0.0), (1e4, 1e4, 0.5, 0.3, 0.0), (3e3, 3e4, 1.0, 0.5, 0.0), (3e4, 3e3, 0.5, 0.5, 0.0),
         (1e4, 1e4, 1.0, 0.5, 0.05), (1e3, 1e3, 1.0, 0.5, 0.1)]
     for below, above, light, half, offset in variants:
-        b = ModelBuilder(Material(restitution=0.0, friction=0.0))
-        b.set_terrain(PlaneTerrain())
-        b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
-        b.add_box((half, half, half), light, position=(offset, 1.0 + half, 0.0))
-        b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 1.5 + 2.0 * half, 0.0))
-        sim = simulate(b, sleep=False)  # sleeping would stop a creep: the solver's own answer is wanted
+        # sleeping off (would stop a creep: the solver's own answer is wanted)
+        sim = cases.squeezed_column(below, above, light, half, offset)
         sim.step(60)
         start = host(sim, "body_pos").copy()
         fastest = 0.0

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig
+from warp_sim import ModelBuilder, NoTerrain, PlaneTerrain, SimConfig, cases
 from warp_sim.builder import Material
 from warp_sim.simulator import Simulator
 from warp_sim.solvers.soft_step import RELAX_PASSES, soft_coefficients, sweep_tolerance
@@ -263,12 +263,7 @@ def test_a_light_cube_between_two_heavy_ones_stands(below, above, friction, ligh
     cube's contacts.  After the first second, as a resting stack: no point faster than
     sleep_velocity, the speed below which the sleep rule takes a body for still, and no body
     moving by a tenth of column_sag in two seconds."""
-    b = ModelBuilder(Material(restitution=0.0, friction=friction))
-    b.set_terrain(PlaneTerrain())
-    b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
-    b.add_box((half, half, half), light, position=(offset, 1.0 + half, 0.0))
-    b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 1.5 + 2.0 * half, 0.0))
-    sim = Simulator(b.finalize(device), SimConfig(sleep=False, device=device))
+    sim = cases.squeezed_column(below, above, light, half, offset, friction, device)
     sim.step(60)
     start = sim.state.body_pos.numpy().copy()
     fastest = 0.0

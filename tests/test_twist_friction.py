@@ -11,7 +11,7 @@ import pytest
 import warp as wp
 
 from warp_sim import ModelBuilder, SimConfig, Simulator, cases
-from warp_sim.builder import Material
+from warp_sim.builder import Material, random_quaternions
 from warp_sim.collide import contact_patch as twist
 from warp_sim.terrain import PlaneTerrain
 
@@ -249,8 +249,6 @@ def test_a_plate_at_rest_on_a_curved_slope_does_not_walk(half, seed, face_fricti
     plate's points took and dropped load, the square plate kept rocking and walked 69 mm (seed 5)
     and 13 mm (seed 6) down the slope, the oblong one 5 mm (seed 6); friction at the points
     themselves stood."""
-    from warp_sim.builder import random_quaternions
-
     terrain = cases.DEFAULT_TERRAIN
     rng, x, z = drop_place(seed)
 

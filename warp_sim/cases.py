@@ -189,6 +189,20 @@ def spin_down_rate(half, friction: float) -> float:
 DEFAULT_TERRAIN = FourierTerrain()
 
 
+def squeezed_column(below: float, above: float, light: float = 1.0, half: float = 0.5, offset: float = 0.0,
+                    friction: float = 0.0, device="cpu", **config) -> Simulator:
+    """A light cube (``light`` kg, half extent ``half``) set down at rest between two unit-half cubes of
+    ``below`` and ``above`` kg on the plane, ``offset`` off their axis along x, restitution 0: the
+    column the substep plan raises substeps for, and without friction the squeeze
+    (collide/box_box.py: near-parallel faces).  Bodies (below, light, above); sleeping off."""
+    b = ModelBuilder(Material(restitution=0.0, friction=friction))
+    b.set_terrain(PlaneTerrain())
+    b.add_box((0.5, 0.5, 0.5), below, position=(0.0, 0.5, 0.0))
+    b.add_box((half, half, half), light, position=(offset, 1.0 + half, 0.0))
+    b.add_box((0.5, 0.5, 0.5), above, position=(0.0, 1.5 + 2.0 * half, 0.0))
+    return _sim(b, device, **config)
+
+
 def terrain_drop(count: int, shape="sphere", terrain: FourierTerrain | None = None, spacing=1.2, clearance=0.5,
                  radius=0.25, half_extents=(0.25, 0.25, 0.25), rolling_resistance=0.1, friction=0.6,
                  restitution=0.0, dt=1.0 / 60.0, substeps=4, seed=0, body_contact=False,
