@@ -54,6 +54,8 @@ VARIANTS = {
     "face friction at points": {"face_friction": "points"},
     # boxes tested at their checkpoints alone, blind to crests between them (collide/face_search.py)
     "checkpoints only": {"face_search": False},
+    # every support-face checkpoint in reach holds a row, also where the corners bound it (collide/bounded_points.py)
+    "every face point": {"prune_face_points": False},
     # every body's terrain contacts searched every pass, still ones too (collide/still_contacts.py)
     "search every pass": {"still_contacts": False},
     # one solve sweep a substep instead of two (Box2D v3's count; its accuracy: audit.py --set iterations=1)

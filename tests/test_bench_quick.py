@@ -26,7 +26,7 @@ def test_full_runs_default_to_results(tmp_path):
 
 
 @pytest.mark.parametrize("bench", ["scaling", "peers", "stability", "work_precision", "thin_rain", "body_order",
-                                   "face_friction", "simultaneous_impacts"])
+                                   "face_friction", "simultaneous_impacts", "paired"])
 def test_quick_into_results_is_refused(bench):
     import importlib
 

@@ -79,6 +79,10 @@ class SimConfig:
     # boxes on a Fourier terrain: the support face's checkpoints also see crests between them
     # (collide/face_search.py); False: the checkpoints alone, faster, and blind to those crests
     face_search: bool = True
+    # boxes on a Fourier terrain: a checkpoint between the support face's corners holds a row only
+    # where it lies deeper than the corners bound it (collide/bounded_points.py); False: every
+    # checkpoint in reach holds one
+    prune_face_points: bool = True
     # a still body's terrain contacts carried to its new pose instead of searched again
     # (collide/still_contacts.py); False: every body searched every pass
     still_contacts: bool = True

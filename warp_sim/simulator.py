@@ -213,8 +213,8 @@ class Simulator:
             bind(BodyModel, m, m), bind(TerrainModel, m, m),
             # Settings
             h, float(np.linalg.norm(self.config.gravity)), speculative_margin, int(self.terrain_cull),
-            int(refresh_spheres), int(struck), int(self.config.face_search), int(self.closest_jet),
-            int(carry_still and self.config.still_contacts),
+            int(refresh_spheres), int(struck), int(self.config.face_search), int(self.config.prune_face_points),
+            int(self.closest_jet), int(carry_still and self.config.still_contacts),
             # State in, Solver in, In
             bind(BodyState, state, state), self.solver.solver_ref_pos, self.struck.body_struck_reach,
             # Contacts

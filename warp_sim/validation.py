@@ -412,6 +412,7 @@ SIM_SCHEMA = {
     "convergence_gravity_share": Number(ge=0, le=1),
     "speculative_margin": Number(ge=0),
     "face_search": Boolean(),
+    "prune_face_points": Boolean(),
     "still_contacts": Boolean(),
     "solver": Choice(SOLVERS),
     "sleep": Boolean(),

@@ -78,6 +78,7 @@ from ..terrain import (TERRAIN_FOURIER, TERRAIN_PLANE, FourierTerrain, HeightSam
                        fourier_height_slope, fourier_normal, fourier_sample)
 from ..types import SHAPE_SPHERE
 from .closest_jet import jet_step
+from .bounded_points import corner_index, is_corner, prune_bounded_points
 from .face_search import cell_rise, deepest_in_cell, on_support_face, support_face
 from .still_contacts import (NO_ANCHOR, STILL_SPEED, STILL_TRAVEL, carry_still_contacts, closable_gap, close_slot,
                              travel_since, window_floor)
@@ -330,6 +331,7 @@ def collide_terrain(
     refresh_spheres: int,
     struck: int,
     face_search: int,
+    prune_face_points: int,
     jet_search: int,
     still_contacts: int,
     # State in
@@ -435,6 +437,7 @@ def collide_terrain(
         curve_rise = 0.5 * terrain.terrain_curvature_bound * travel * travel
 
     active = int(0)
+    corner_depth = wp.vec4(0.0)  # the support face's corners, as found (bounded_points.py)
     for slot in range(start, start + count):
         if refresh_spheres != 0 and contacts.terrain_contact_active[slot] == 0:
             continue  # a wide sphere's idle slot stays idle until the next pass
@@ -518,6 +521,9 @@ def collide_terrain(
                         speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
                     window = speculative_margin + h * speed + h * h * gravity_length
                     reachable = True
+                    if on_support_face(local, half, face) and is_corner(local, half):
+                        # bounded_points.py: a corner counts as lying at least at its window's edge
+                        corner_depth[corner_index(local, face)] = -window
                     if cull != 0:
                         rise = box_rise_bound(center, arm[0], arm[2], terrain.terrain_cubic_bound)
                         if searched:
@@ -536,6 +542,8 @@ def collide_terrain(
                                                      terrain.terrain_offset, point[0], point[2])
                             normal = fourier_normal(s.grad)
                             depth = (s.height - point[1]) * normal[1]
+                        if on_support_face(local, half, face) and is_corner(local, half):
+                            corner_depth[corner_index(local, face)] = wp.max(depth, -window)
 
         point_vel = v + wp.cross(omega, point - x)
         gap_closable = closable_gap(point_vel, normal, reach_speed, floor, speculative_margin, h, gravity_length)
@@ -554,6 +562,9 @@ def collide_terrain(
             contacts.terrain_contact_depth[slot] = depth
         else:
             close_slot(contacts, slot)
+    if fourier_box and prune_face_points != 0:
+        # the rows between the support face's corners that the corners already hold (bounded_points.py)
+        active -= prune_bounded_points(start, count, x, half, face, corner_depth, model.checkpoint_local, contacts)
     contacts.terrain_contact_count[body] = active
     if still_contacts != 0:
         # the pose these slots were found at; none where they were found mid-step or for a body
