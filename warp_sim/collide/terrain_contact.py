@@ -521,7 +521,8 @@ def collide_terrain(
                         speed += wp.length(omega) * (cell[0] + cell[1] + cell[2])
                     window = speculative_margin + h * speed + h * h * gravity_length
                     reachable = True
-                    if on_support_face(local, half, face) and is_corner(local, half):
+                    face_corner = on_support_face(local, half, face) and is_corner(local, half)
+                    if face_corner:
                         # bounded_points.py: a corner counts as lying at least at its window's edge
                         corner_depth[corner_index(local, face)] = -window
                     if cull != 0:
@@ -542,7 +543,7 @@ def collide_terrain(
                                                      terrain.terrain_offset, point[0], point[2])
                             normal = fourier_normal(s.grad)
                             depth = (s.height - point[1]) * normal[1]
-                        if on_support_face(local, half, face) and is_corner(local, half):
+                        if face_corner:
                             corner_depth[corner_index(local, face)] = wp.max(depth, -window)
 
         point_vel = v + wp.cross(omega, point - x)
